@@ -1,0 +1,6 @@
+"""``python -m servosurf``."""
+import sys
+
+from .cli import main
+
+sys.exit(main())
