@@ -108,7 +108,7 @@ class Surface:
         return float(np.mean(np.abs(v - v.mean())))
 
     def sq(self) -> float:
-        """Root-mean-square height about the mean over valid pixels, in m (no filter)."""
+        """Root-mean-square height about the mean of valid pixels, in m (no filter)."""
         v = self._valid_values()
         return float(np.sqrt(np.mean((v - v.mean()) ** 2)))
 
@@ -157,7 +157,9 @@ class Profile:
         object.__setattr__(self, "z", z)
         dx = float(self.dx)
         if not np.isfinite(dx) or dx <= 0:
-            raise ConfigError(f"Profile.dx must be a positive step in m, got {self.dx!r}")
+            raise ConfigError(
+                f"Profile.dx must be a positive step in m, got {self.dx!r}"
+            )
         object.__setattr__(self, "dx", dx)
 
     @property

@@ -1,0 +1,23 @@
+"""Mechatronic model of the FTS: plant (Eqs 1-7), PIDF, tuning, closed loop."""
+
+from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, tune_pidf
+from ._machine import (
+    Actuator,
+    Controller,
+    Disturbances,
+    Machine,
+    Mechanics,
+    PSDModel,
+    Sensor,
+    builtin_machines,
+    describe_machine,
+    load_machine,
+)
+from ._plant import Plant, paper_eq_frf, plant_from_machine
+
+__all__ = [
+    "Actuator", "Controller", "Disturbances", "Machine", "Mechanics", "PSDModel",
+    "Sensor", "builtin_machines", "describe_machine", "load_machine",
+    "Plant", "paper_eq_frf", "plant_from_machine",
+    "PIDF", "LoopFRF", "ServoLoop", "tune_pidf", "PATHS",
+]

@@ -1,0 +1,23 @@
+"""Figures (matplotlib, Agg) and 3-D renders (pyvista), imported lazily.
+
+Nothing here loads a plotting back-end at ``import servosurf``; each function imports
+matplotlib or pyvista when called.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "plot_disturbance_frfs": "._servo_plots", "plot_cas": "._servo_plots",
+    "plot_rms_vs_bandwidth": "._servo_plots", "plot_error_spectra": "._servo_plots",
+    "plot_power_shares": "._servo_plots", "plot_loop_bode": "._servo_plots",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module 'servosurf.viz' has no attribute {name!r}")

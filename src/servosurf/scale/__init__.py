@@ -1,0 +1,10 @@
+"""Whole-workpiece runs: tiling, chunked Zarr output and dask execution.
+
+Needs the ``scale`` extra (``zarr``, ``dask[distributed]``), imported on use.
+"""
+
+from __future__ import annotations
+
+from ._face import FaceResult, chunk_slices, compute_tile, face_field, simulate_face
+
+__all__ = ["simulate_face", "compute_tile", "face_field", "chunk_slices", "FaceResult"]

@@ -1,0 +1,343 @@
+"""Whole-workpiece simulation: tiles streamed to a chunked on-disk Zarr array.
+
+Every chunk of the output array is one task. A task samples the toolpath only in the
+time and angular windows that can cut its pixels (with a depth-based reach), adds the
+deviation, runs the swept-arc kernel with the whole field's pixel coordinates and
+writes its chunk. Tiles therefore reproduce a single whole-field run bit for bit.
+Tasks run in this process or, one task per chunk, on a dask ``distributed.Client``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._progress import bar
+from .._validation import check_no_kwargs, check_positive
+from ..errors import ConfigError
+from ..toolpath._paths import ToolpathSpec
+from ..toolpath._sample import SampledPath, count_samples, field_reach, sample
+from ..toolpath._sweep import prepare_path, run_kernel
+from ..toolpath._tool import Field
+
+__all__ = ["face_field", "simulate_face", "compute_tile", "FaceResult", "chunk_slices"]
+
+#: Split a tile until its windowed path has at most this many samples (memory).
+MAX_TILE_SAMPLES = 4_000_000
+
+
+def face_field(radius: float, pitch: float) -> Field:
+    """A square field centred on the spindle axis that covers a face of ``radius``.
+
+    Parameters
+    ----------
+    radius : float
+        Face radius, in m.
+    pitch : float
+        Grid pitch, in m.
+
+    Returns
+    -------
+    Field
+        ``2 * ceil(radius / pitch) + 1`` pixels per side, pixel centres on multiples
+        of ``pitch`` (the axis is a pixel centre).
+    """
+    radius = check_positive(radius, name="radius")
+    pitch = check_positive(pitch, name="pitch")
+    n = 2 * math.ceil(radius / pitch - 1e-9) + 1
+    return Field(pitch_x=pitch, pitch_y=pitch, nx=n, ny=n, center_x=0.0, center_y=0.0)
+
+
+def chunk_slices(shape: tuple[int, int], chunk: tuple[int, int]):
+    """Half-open (rows, cols) ranges of the chunks of an array, row-major.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        (ny, nx).
+    chunk : tuple of int
+        Chunk shape (rows, cols).
+
+    Returns
+    -------
+    list of tuple
+        ``((r0, r1), (c0, c1))`` per chunk.
+    """
+    ny, nx = shape
+    cy, cx = chunk
+    return [((r, min(r + cy, ny)), (c, min(c + cx, nx)))
+            for r in range(0, ny, cy) for c in range(0, nx, cx)]
+
+
+def _initial_tile(field, rows, cols, initial, face_radius):
+    shape = (rows[1] - rows[0], cols[1] - cols[0])
+    if isinstance(initial, np.ndarray):
+        out = np.array(initial[rows[0]:rows[1], cols[0]:cols[1]], dtype=np.float64)
+    else:
+        out = np.full(shape, float(initial))
+    if face_radius is not None:
+        x = field.x0 + (cols[0] + np.arange(shape[1])) * field.pitch_x
+        y = field.y0 + (rows[0] + np.arange(shape[0])) * field.pitch_y
+        out[(x[None, :] ** 2 + y[:, None] ** 2) > face_radius**2] = np.nan
+    return out
+
+
+def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
+                 cols: tuple[int, int], *, initial: float | np.ndarray = 0.0,
+                 face_radius: float | None = None,
+                 deviation: Callable[[SampledPath], np.ndarray] | None = None,
+                 depth_margin: float = 1e-6, fs: float | None = None,
+                 max_tile_samples: int = MAX_TILE_SAMPLES,
+                 n_threads: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+    """Machined heights of one tile of ``field``.
+
+    Parameters
+    ----------
+    spec : ToolpathSpec
+        Toolpath, tool (the field of ``spec`` is ignored).
+    field : Field
+        The whole grid.
+    rows, cols : tuple of int
+        Half-open row and column ranges of the tile.
+    initial : float or ndarray of shape field.shape, default: 0.0
+        Pre-cut height, in m.
+    face_radius : float, optional
+        Pixels farther than this from the axis (m) are not workpiece: NaN.
+    deviation : callable, optional
+        ``deviation(path) -> dz`` (m, shape (path.n,)) added to the tool height. It
+        must depend only on the sample times (``path.index``) so that every tile sees
+        the same deviation at the same sample.
+    depth_margin : float, default: 1e-6
+        How far the deviation may push the tool below its commanded depth, in m. The
+        reach of the sampled windows follows from the depth plus this margin; a
+        deeper sample raises :class:`ConfigError`.
+    fs : float, optional
+        Sampling rate in Hz (default 199.6 kHz).
+    max_tile_samples : int, default: 4_000_000
+        Tiles whose windowed path would be longer are split in four (near the axis
+        every revolution crosses the tile at all angles).
+    n_threads : int, optional
+        Numba threads.
+
+    Returns
+    -------
+    z : ndarray of shape (rows, cols)
+        Heights in m.
+    stats : dict
+        ``n_samples`` (samples generated), ``n_points`` (pixels computed),
+        ``n_subtiles``.
+    """
+    from ..toolpath._sample import FS_DEFAULT
+
+    fs = FS_DEFAULT if fs is None else fs
+    out = _initial_tile(field, rows, cols, initial, face_radius)
+    stats = {"n_samples": 0, "n_points": int(np.isfinite(out).sum()) if out.size else 0,
+             "n_subtiles": 0}
+    if not np.any(~np.isnan(out)):
+        return out, stats
+    tool = spec.tool
+    top = float(np.nanmax(out))
+    if not math.isfinite(top):
+        reach = tool.half_width
+        z_floor = -math.inf
+    else:
+        depth = top + spec.path.max_depth
+        reach = field_reach(tool, depth, depth_margin=depth_margin)
+        z_floor = -(spec.path.max_depth + depth_margin)
+    stack = [(rows, cols)]
+    while stack:
+        (r0, r1), (c0, c1) = stack.pop()
+        sub = out[r0 - rows[0]:r1 - rows[0], c0 - cols[0]:c1 - cols[0]]
+        if not np.any(~np.isnan(sub)):
+            continue
+        sf = field.subfield(r0, r1, c0, c1)
+        n = count_samples(spec, fs=fs, field=sf, reach=reach)
+        if n > max_tile_samples and (r1 - r0 > 16 or c1 - c0 > 16):
+            rm = (r0 + r1) // 2 if r1 - r0 > 16 else r1
+            cm = (c0 + c1) // 2 if c1 - c0 > 16 else c1
+            for rr in ((r0, rm), (rm, r1)):
+                for cc in ((c0, cm), (cm, c1)):
+                    if rr[1] > rr[0] and cc[1] > cc[0]:
+                        stack.append((rr, cc))
+            continue
+        path = sample(spec, fs=fs, field=sf, reach=reach, max_samples=max(n, 1))
+        stats["n_samples"] += path.n
+        stats["n_subtiles"] += 1
+        if path.n < 2:
+            continue
+        if deviation is not None:
+            path = path.add_z(deviation(path))
+        if path.z.min() < z_floor - 1e-15:
+            raise ConfigError(
+                f"the deviation takes the tool {-(path.z.min() - z_floor):.3g} m below "
+                f"the commanded depth plus depth_margin ({depth_margin:g} m); raise "
+                "depth_margin"
+            )
+        prep = prepare_path(path, tool, field, rows=(r0, r1), cols=(c0, c1), crop=False)
+        if prep is None:
+            continue
+        buf = np.ascontiguousarray(sub)
+        run_kernel(prep, tool, field, buf, n_threads=n_threads, row0=r0, col0=c0)
+        sub[...] = buf
+    return out, stats
+
+
+def _open_array(store, shape, chunk, mode):
+    import zarr
+
+    if mode == "w":
+        return zarr.create_array(store=store, shape=shape, chunks=chunk, dtype="f8",
+                                 fill_value=np.nan, overwrite=True,
+                                 dimension_names=("y", "x"))
+    return zarr.open_array(store=store, mode=mode)
+
+
+def _chunk_task(spec, field, rows, cols, store, kwargs):
+    """Dask task: compute one chunk and write it into the Zarr store at ``store``."""
+    t0 = time.perf_counter()
+    z, stats = compute_tile(spec, field, rows, cols, **kwargs)
+    arr = _open_array(store, None, None, "r+")
+    arr[rows[0]:rows[1], cols[0]:cols[1]] = z
+    stats["seconds"] = time.perf_counter() - t0
+    return stats
+
+
+@dataclass(frozen=True)
+class FaceResult:
+    """Outcome of :func:`simulate_face`.
+
+    Parameters
+    ----------
+    array : zarr.Array
+        Heights in m, shape ``field.shape`` (rows = y, columns = x), NaN off the face.
+    field : Field
+        The grid (pitch in m; pixel (i, j) at x0 + j dx, y0 + i dy).
+    seconds : float
+        Wall time, in s.
+    n_points : int
+        Pixels computed (on the face).
+    n_samples : int
+        Path samples generated over all tiles.
+    n_tasks : int
+        Chunks (tasks).
+    """
+
+    array: Any
+    field: Field
+    seconds: float
+    n_points: int
+    n_samples: int
+    n_tasks: int
+
+    @property
+    def points_per_s(self) -> float:
+        """Throughput in pixels per second."""
+        return self.n_points / self.seconds if self.seconds > 0 else math.inf
+
+
+def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
+                  face_radius: float | None = None,
+                  chunk: tuple[int, int] = (1024, 1024),
+                  initial: float | np.ndarray = 0.0,
+                  deviation: Callable[[SampledPath], np.ndarray] | None = None,
+                  depth_margin: float = 1e-6, fs: float | None = None,
+                  client: Any = None, n_threads: int | None = None,
+                  max_tile_samples: int = MAX_TILE_SAMPLES, **kwargs) -> FaceResult:
+    """Simulate a whole face tile by tile into a chunked Zarr array.
+
+    Parameters
+    ----------
+    spec : ToolpathSpec
+        Toolpath and tool.
+    store : str, Path or zarr store
+        Where the array goes: a directory (``.zarr``) or any zarr store (for example
+        ``zarr.storage.MemoryStore()``). With a dask client it must be a directory
+        that the workers can reach.
+    field : Field, optional
+        The grid; default ``spec.field``. See :func:`face_field` for a whole face.
+    face_radius : float, optional
+        Workpiece radius in m; pixels outside stay NaN and are not computed.
+    chunk : tuple of int, default: (1024, 1024)
+        Chunk (= task) shape, rows x columns.
+    initial : float or ndarray of shape field.shape, default: 0.0
+        Pre-cut height in m.
+    deviation : callable, optional
+        ``deviation(path) -> dz`` in m, a function of the sample times only (see
+        :func:`compute_tile`). Must be picklable with a dask client.
+    depth_margin : float, default: 1e-6
+        Bound on how far the deviation lowers the tool, in m.
+    fs : float, optional
+        Sampling rate, in Hz (default 199.6 kHz).
+    client : distributed.Client or str, optional
+        Run one task per chunk on this dask client (or scheduler address).
+    n_threads : int, optional
+        Numba threads per task (in-process runs).
+    max_tile_samples : int, default: 4_000_000
+        Memory bound per (sub-)tile path.
+
+    Returns
+    -------
+    FaceResult
+        The array and run statistics.
+
+    Raises
+    ------
+    ConfigError
+        On bad arguments.
+    TypeError
+        On unknown keyword arguments.
+
+    Notes
+    -----
+    Peak memory is one chunk of output plus one windowed path (at most
+    ``max_tile_samples`` samples, about 50 bytes each while sampling) per worker.
+    """
+    check_no_kwargs(kwargs, name="simulate_face")
+    if not isinstance(spec, ToolpathSpec):
+        raise ConfigError(f"spec must be a ToolpathSpec, got {type(spec).__name__}")
+    field = spec.field if field is None else field
+    if isinstance(initial, np.ndarray) and initial.shape != field.shape:
+        raise ConfigError(f"initial must have shape {field.shape}, got {initial.shape}")
+    chunk = (int(chunk[0]), int(chunk[1]))
+    if min(chunk) < 1:
+        raise ConfigError(f"chunk must be positive, got {chunk}")
+    if isinstance(store, Path):
+        store = str(store)
+    t0 = time.perf_counter()
+    arr = _open_array(store, field.shape, chunk, "w")
+    tasks = chunk_slices(field.shape, chunk)
+    kw = dict(initial=initial, face_radius=face_radius, deviation=deviation,
+              depth_margin=depth_margin, fs=fs, max_tile_samples=max_tile_samples)
+    n_points = n_samples = 0
+    if client is None:
+        for rows, cols in bar(tasks, total=len(tasks), desc="tiles"):
+            z, stats = compute_tile(spec, field, rows, cols, n_threads=n_threads, **kw)
+            if stats["n_points"]:
+                arr[rows[0]:rows[1], cols[0]:cols[1]] = z
+            n_points += stats["n_points"]
+            n_samples += stats["n_samples"]
+    else:
+        if not isinstance(store, str):
+            raise ConfigError("with a dask client, store must be a directory path")
+        from distributed import Client, as_completed
+
+        own = isinstance(client, str)
+        cl = Client(client) if own else client
+        try:
+            futs = [cl.submit(_chunk_task, spec, field, rows, cols, store, kw,
+                              pure=False) for rows, cols in tasks]
+            for fut in bar(as_completed(futs), total=len(futs), desc="tiles"):
+                stats = fut.result()
+                n_points += stats["n_points"]
+                n_samples += stats["n_samples"]
+        finally:
+            if own:
+                cl.close()
+    return FaceResult(array=arr, field=field, seconds=time.perf_counter() - t0,
+                      n_points=n_points, n_samples=n_samples, n_tasks=len(tasks))

@@ -1,0 +1,404 @@
+"""Machined surface: the lower envelope of the tool arc swept along a sampled path."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from contextlib import contextmanager
+from typing import Literal
+
+import numpy as np
+
+from .._validation import check_no_kwargs
+from ..errors import ConfigError
+from ..metrology._surface import Surface
+from ._sample import SampledPath
+from ._tool import Field, Tool, ToolpathWarning
+
+__all__ = ["sweep", "check_clearance", "prepare_path", "PreparedPath"]
+
+_METHODS = ("pruned", "exhaustive")
+
+
+def check_clearance(path: SampledPath, tool: Tool, *, stacklevel: int = 2) -> float:
+    """Warn when the path's slope along the cut exceeds the tool's clearance angle.
+
+    Parameters
+    ----------
+    path : SampledPath
+        The sampled path (with any deviation already added to ``z``).
+    tool : Tool
+        The tool; its ``clearance_angle`` (rad) is the limit.
+    stacklevel : int, default: 2
+        Passed to :func:`warnings.warn`.
+
+    Returns
+    -------
+    float
+        The largest slope angle along the cut, in rad (0 for an empty path).
+
+    Warns
+    -----
+    ToolpathWarning
+        When ``atan(max |dz / ds|) > clearance_angle``: the flank rubs the surface.
+
+    Notes
+    -----
+    Intervals within one nose radius of the spindle axis are skipped: there the
+    cutting speed vanishes and any height change exceeds every clearance angle.
+    """
+    if path.n < 2:
+        return 0.0
+    s = path.slope_along_cut()
+    rm = 0.5 * (path.r[1:] + path.r[:-1])
+    s = np.where(rm >= tool.nose_radius, np.abs(s), np.nan)
+    if not np.any(np.isfinite(s)):
+        return 0.0
+    k = int(np.nanargmax(s))
+    angle = math.atan(float(s[k]))
+    if angle > tool.clearance_angle:
+        warnings.warn(
+            ToolpathWarning(
+                f"toolpath slope along the cutting direction reaches "
+                f"{math.degrees(angle):.2f} degrees (at t = {path.t[k]:.6g} s, r = "
+                f"{rm[k]:.6g} m), above the tool clearance angle of "
+                f"{math.degrees(tool.clearance_angle):.2f} degrees: the flank would "
+                "rub the cut surface. Lower the surface speed or the amplitude, or use "
+                "a tool with more clearance."
+            ),
+            stacklevel=stacklevel,
+        )
+    return angle
+
+
+class PreparedPath:
+    """Kernel inputs derived from a sampled path for one field (internal).
+
+    Parameters
+    ----------
+    path : SampledPath
+        The path (after cropping).
+    theta_ref : float
+        Start angle of bucket 0, in rad.
+    """
+
+    def __init__(self, path: SampledPath, theta_ref: float) -> None:
+        from ..kernels._sweep import N_STAT, RMID, _bucket_stats
+
+        self.path = path
+        self.theta = path.theta
+        self.r = path.r
+        self.z = path.z
+        self.gap = np.ascontiguousarray(path.gaps())
+        self.theta_ref = float(theta_ref)
+        nb = int(math.floor((self.theta[-1] - self.theta_ref) / (2 * math.pi))) + 1
+        self.bidx = np.zeros((nb, 4), dtype=np.int64)
+        self.bstat = np.zeros((nb, N_STAT), dtype=np.float64)
+        _bucket_stats(self.theta, self.r, self.z, self.gap, self.theta_ref, self.bidx,
+                      self.bstat)
+        d = np.diff(self.bstat[:, RMID])
+        if np.all(d <= 0):
+            self.direction = -1
+        elif np.all(d >= 0):
+            self.direction = 1
+        else:
+            self.direction = 0
+        self.rmin = float(self.r.min())
+
+    @property
+    def n_buckets(self) -> int:
+        """Number of revolution buckets."""
+        return int(self.bidx.shape[0])
+
+
+def _field_rect(field: Field, rows: tuple[int, int], cols: tuple[int, int]):
+    xmin = field.x0 + cols[0] * field.pitch_x
+    xmax = field.x0 + (cols[1] - 1) * field.pitch_x
+    ymin = field.y0 + rows[0] * field.pitch_y
+    ymax = field.y0 + (rows[1] - 1) * field.pitch_y
+    return xmin, xmax, ymin, ymax
+
+
+def _rect_polar(xmin, xmax, ymin, ymax, reach):
+    """Radial range and angular window (or None = all angles) of a rectangle."""
+    cx = min(max(0.0, xmin), xmax)
+    cy = min(max(0.0, ymin), ymax)
+    rmin = math.hypot(cx, cy)
+    rmax = max(math.hypot(x, y) for x in (xmin, xmax) for y in (ymin, ymax))
+    if rmin <= reach or rmin == 0.0:
+        return rmin, rmax, None
+    centre = math.atan2(0.5 * (ymin + ymax), 0.5 * (xmin + xmax))
+    rel = []
+    for x in (xmin, xmax):
+        for y in (ymin, ymax):
+            a = math.atan2(y, x) - centre
+            rel.append((a + math.pi) % (2 * math.pi) - math.pi)
+    return rmin, rmax, (centre, min(min(rel), 0.0), max(max(rel), 0.0))
+
+
+def _crop(path: SampledPath, rmin: float, rmax: float, window, reach: float):
+    """Keep the intervals that can cut the rectangle (both of their samples)."""
+    th, r = path.theta, path.r
+    if path.n < 2:
+        return path
+    rlo = np.minimum(r[:-1], r[1:])
+    rhi = np.maximum(r[:-1], r[1:])
+    reach = reach + 1e-9  # 1 nm: rounding allowance, keeps every touching interval
+    hit = (rlo <= rmax + reach) & (rhi >= rmin - reach)
+    hit |= rlo <= reach - rmin  # the arc across the axis
+    if window is not None:
+        centre, lo, hi = window
+        lo, hi = lo - 1e-9, hi + 1e-9  # rad, rounding allowance of rel
+        two_pi = 2.0 * math.pi
+        rel = np.mod(th[:-1] - centre + math.pi, two_pi) - math.pi
+        dth = np.diff(th)
+        ang = ((rel <= hi) & (rel + dth >= lo)) | (rel - two_pi + dth >= lo)
+        ang |= dth >= two_pi
+        hit &= ang
+    keep = np.zeros(path.n, dtype=bool)
+    keep[:-1] |= hit
+    keep[1:] |= hit
+    if keep.sum() > 0.8 * path.n:
+        return path
+    return path.select(keep)
+
+
+def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
+                 rows: tuple[int, int] | None = None,
+                 cols: tuple[int, int] | None = None,
+                 crop: bool = True) -> PreparedPath | None:
+    """Crop a sampled path to what can cut a (sub-)field and build kernel inputs.
+
+    Parameters
+    ----------
+    path : SampledPath
+        The sampled path.
+    tool : Tool
+        The tool.
+    field : Field
+        The grid.
+    rows, cols : tuple of int, optional
+        Half-open row and column ranges of the part of ``field`` to compute.
+    crop : bool, default: True
+        Drop the samples that cannot touch the (sub-)field first. Skip it when the
+        path was sampled for this field already (it changes speed, not results).
+
+    Returns
+    -------
+    PreparedPath or None
+        None when fewer than two samples can cut the field.
+    """
+    rows = (0, field.ny) if rows is None else rows
+    cols = (0, field.nx) if cols is None else cols
+    reach = tool.half_width
+    rect = _field_rect(field, rows, cols)
+    rmin, rmax, window = _rect_polar(*rect, reach)
+    p = _crop(path, rmin, rmax, window, reach) if crop else path
+    if p.n < 2:
+        return None
+    centre = 0.0 if window is None else window[0]
+    # Bucket boundaries half a turn from the field centre, at or before theta[0].
+    ref = centre - math.pi
+    theta_ref = p.theta[0] - ((p.theta[0] - ref) % (2 * math.pi))
+    if not (theta_ref <= p.theta[0]):  # rounding
+        theta_ref = p.theta[0]
+    return PreparedPath(p, theta_ref)
+
+
+def _validate_path(path: SampledPath) -> None:
+    if not isinstance(path, SampledPath):
+        raise ConfigError(f"path must be a SampledPath, got {type(path).__name__}")
+    for name in ("theta", "r", "z"):
+        if not np.all(np.isfinite(getattr(path, name))):
+            raise ConfigError(f"path.{name} must have finite values")
+    if path.n > 1 and not np.all(np.diff(path.theta) > 0):
+        raise ConfigError("path.theta must be strictly increasing (unwrapped angle, rad)")
+    if path.n and path.r.min() < 0:
+        raise ConfigError(f"path.r must be >= 0 m, got min {path.r.min()!r}")
+
+
+def _initial_array(initial, shape, rows, cols, field) -> np.ndarray:
+    if initial is None:
+        return np.zeros(shape)
+    if isinstance(initial, Surface):
+        initial = initial.z
+    if np.isscalar(initial):
+        v = float(initial)
+        if math.isnan(v) or v == -math.inf:
+            raise ConfigError(f"initial must be a height in m or +inf, got {v!r}")
+        return np.full(shape, v)
+    a = np.asarray(initial, dtype=np.float64)
+    if a.shape == field.shape and shape != field.shape:
+        a = a[rows[0]:rows[1], cols[0]:cols[1]]
+    if a.shape != shape:
+        raise ConfigError(
+            f"initial must have the field's shape {shape} (rows, cols), got {a.shape}"
+        )
+    if np.any(a == -np.inf):
+        raise ConfigError("initial must not contain -inf")
+    return np.array(a, dtype=np.float64, order="C", copy=True)
+
+
+@contextmanager
+def _threads(n_threads: int | None):
+    if n_threads is None:
+        yield
+        return
+    import numba
+
+    n = int(n_threads)
+    if not 1 <= n <= numba.config.NUMBA_NUM_THREADS:
+        raise ConfigError(
+            f"n_threads must be in [1, {numba.config.NUMBA_NUM_THREADS}], got {n_threads!r}"
+        )
+    old = numba.get_num_threads()
+    numba.set_num_threads(n)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
+
+
+def sweep(path: SampledPath, tool: Tool, field: Field, *,
+          initial: float | np.ndarray | Surface | None = None,
+          method: Literal["pruned", "exhaustive"] = "pruned",
+          n_threads: int | None = None,
+          rows: tuple[int, int] | None = None,
+          cols: tuple[int, int] | None = None,
+          check: bool = True,
+          **kwargs) -> Surface:
+    """Machined height map: the lower envelope of the tool arc along a sampled path.
+
+    Parameters
+    ----------
+    path : SampledPath
+        Tool path (angle in rad, radius and height in m), whole or windowed.
+    tool : Tool
+        Round-nose tool: radius R (m), arc half-angle (rad), optional waviness.
+    field : Field
+        The grid (pitch in m, size, centre).
+    initial : float, ndarray of shape (ny, nx), Surface or None, default: None
+        Pre-cut height in m. None means a flat face at z = 0. ``np.inf`` means no
+        material limit (uncut pixels stay +inf). NaN pixels are not computed and stay
+        NaN (outside the workpiece or invalid).
+    method : {"pruned", "exhaustive"}, default: "pruned"
+        ``"pruned"`` evaluates only the passes that can be lowest; ``"exhaustive"``
+        evaluates every pass that reaches below the pre-cut height (the baseline).
+        Both give the same result.
+    n_threads : int, optional
+        Numba threads for this call; default numba's current setting.
+    rows, cols : tuple of int, optional
+        Half-open row/column ranges: compute only this tile of the field. Pixel
+        coordinates are those of the whole field, so tiles reproduce a whole-field run
+        bit for bit.
+    check : bool, default: True
+        Validate the path and warn on clearance violations.
+
+    Returns
+    -------
+    Surface
+        Heights in m (rows = y, columns = x) with ``dx``, ``dy``, ``x0``, ``y0`` of
+        the computed tile and the sweep settings in ``metadata["sweep"]``.
+
+    Raises
+    ------
+    ConfigError
+        On a non-monotonic or non-finite path, bad shapes or an unknown method.
+    TypeError
+        On unknown keyword arguments.
+
+    Warns
+    -----
+    ToolpathWarning
+        When the slope along the cut exceeds the clearance angle
+        (:func:`check_clearance`).
+
+    Notes
+    -----
+    The edge is the circular arc of the seed paper's round diamond tool (section 4.2,
+    Table 2) in the radial-axial plane; see :mod:`servosurf.kernels._sweep` for the
+    crossing and bound formulas.
+    """
+    check_no_kwargs(kwargs, name="sweep")
+    if method not in _METHODS:
+        raise ConfigError(f"method must be one of {_METHODS}, got {method!r}")
+    if not isinstance(tool, Tool):
+        raise ConfigError(f"tool must be a Tool, got {type(tool).__name__}")
+    if not isinstance(field, Field):
+        raise ConfigError(f"field must be a Field, got {type(field).__name__}")
+    rows = (0, field.ny) if rows is None else (int(rows[0]), int(rows[1]))
+    cols = (0, field.nx) if cols is None else (int(cols[0]), int(cols[1]))
+    if not (0 <= rows[0] < rows[1] <= field.ny and 0 <= cols[0] < cols[1] <= field.nx):
+        raise ConfigError(
+            f"rows {rows} and cols {cols} must be non-empty ranges inside the field of "
+            f"shape {field.shape}"
+        )
+    shape = (rows[1] - rows[0], cols[1] - cols[0])
+    out = _initial_array(initial, shape, rows, cols, field)
+    if check:
+        _validate_path(path)
+    prep = prepare_path(path, tool, field, rows=rows, cols=cols)
+    meta = {
+        "sweep": {
+            "method": method,
+            "nose_radius": tool.nose_radius,
+            "arc_half_angle": tool.arc_half_angle,
+            "n_samples": int(path.n),
+            "n_samples_used": 0 if prep is None else int(prep.path.n),
+            "fs": path.fs,
+            "rows": list(rows),
+            "cols": list(cols),
+        }
+    }
+    x0 = field.x0 + cols[0] * field.pitch_x
+    y0 = field.y0 + rows[0] * field.pitch_y
+    if prep is None:
+        return Surface(out, field.pitch_x, field.pitch_y, meta, x0, y0)
+    if check:
+        check_clearance(prep.path, tool, stacklevel=3)
+    run_kernel(prep, tool, field, out, method=method, n_threads=n_threads,
+               row0=rows[0], col0=cols[0])
+    return Surface(out, field.pitch_x, field.pitch_y, meta, x0, y0)
+
+
+def run_kernel(prep: PreparedPath, tool: Tool, field: Field, out: np.ndarray, *,
+               method: str = "pruned", n_threads: int | None = None, row0: int = 0,
+               col0: int = 0) -> None:
+    """Call the numba kernel in place on ``out`` (no checks; internal).
+
+    Parameters
+    ----------
+    prep : PreparedPath
+        Kernel inputs from :func:`prepare_path`.
+    tool : Tool
+        The tool.
+    field : Field
+        The whole grid (origin and pitch).
+    out : ndarray of shape (ny, nx)
+        Pre-cut heights in m, overwritten with the machined heights.
+    method : {"pruned", "exhaustive"}, default: "pruned"
+        Kernel.
+    n_threads : int, optional
+        Numba threads.
+    row0, col0 : int, default: 0
+        Position of ``out`` in the field.
+    """
+    from ..kernels._sweep import _sweep_exhaustive, _sweep_pruned
+
+    R = tool.nose_radius
+    hw = tool.half_width
+    s0, ds, wav = tool.waviness_table()
+    wav_bound = max(0.0, float(wav.max())) if wav.size else 0.0
+    slack = 1e-12 * R
+    mirror_rmax = hw - prep.rmin
+    with _threads(n_threads):
+        if method == "pruned":
+            _sweep_pruned(prep.theta, prep.r, prep.z, prep.gap, prep.bidx, prep.bstat,
+                          prep.theta_ref, R, hw, wav, s0, 1.0 / ds, wav_bound, slack,
+                          mirror_rmax, prep.direction, field.x0, field.pitch_x,
+                          col0, field.y0, field.pitch_y, row0, out)
+        else:
+            _sweep_exhaustive(prep.theta, prep.r, prep.z, prep.gap, prep.bidx,
+                              prep.bstat, prep.theta_ref, R, hw, wav, s0, 1.0 / ds,
+                              wav_bound, slack, mirror_rmax, field.x0, field.pitch_x,
+                              col0, field.y0, field.pitch_y, row0, out)

@@ -1,0 +1,360 @@
+"""Static figures of height maps, form error profiles and spectra (matplotlib, Agg).
+
+matplotlib is imported inside each function (never on ``import servosurf``) and
+figures are drawn on an Agg canvas without pyplot, so no global state or GUI
+back-end is touched. Every figure is written atomically: to a temporary file in
+the destination folder, then moved into place with :func:`os.replace`.
+
+Display units appear only here: heights in nm or um, lateral positions in um,
+spatial frequencies in 1/mm. Inputs are SI (m, 1/m, m^3, m/s).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import ConfigError
+
+if TYPE_CHECKING:
+    from ..metrology import Surface
+
+__all__ = [
+    "plot_map",
+    "plot_profile_with_form_error",
+    "plot_spectrum",
+    "plot_filtered_map",
+]
+
+#: Height display units: name -> metres per unit.
+HEIGHT_UNITS: dict[str, float] = {"nm": 1e-9, "um": 1e-6}
+
+_UNIT_LABEL = {"nm": "nm", "um": "\u00b5m"}
+
+
+def _new_figure(figsize: tuple[float, float]) -> Any:
+    """Return a matplotlib Figure attached to an Agg canvas (no pyplot)."""
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:  # pragma: no cover - matplotlib is a dependency
+        raise ImportError(
+            "servosurf plots need matplotlib: pip install servosurf[viz]"
+        ) from None
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save_atomic(fig: Any, path: str | os.PathLike[str], dpi: int) -> Path:
+    """Write ``fig`` as PNG to ``path`` via a temporary file and os.replace."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    folder.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fig.savefig(fh, format="png", dpi=dpi)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def _unit(unit: str) -> float:
+    if unit not in HEIGHT_UNITS:
+        raise ConfigError(f"unit must be one of {sorted(HEIGHT_UNITS)}, got {unit!r}")
+    return HEIGHT_UNITS[unit]
+
+
+def _draw_map(
+    fig: Any, ax: Any, surface: Surface, unit: str, title: str | None
+) -> None:
+    scale = _unit(unit)
+    ny, nx = surface.shape
+    if surface.calibrated:
+        x, y = surface.coords()
+        dx, dy = surface.dx, surface.dy
+        extent = [
+            (x[0] - dx / 2) * 1e6,
+            (x[-1] + dx / 2) * 1e6,
+            (y[-1] + dy / 2) * 1e6,
+            (y[0] - dy / 2) * 1e6,
+        ]
+        xlabel, ylabel = "x (\u00b5m)", "y (\u00b5m)"
+    else:
+        extent = [-0.5, nx - 0.5, ny - 0.5, -0.5]
+        xlabel, ylabel = "x (pixel)", "y (pixel)"
+    width, height = abs(extent[1] - extent[0]), abs(extent[2] - extent[3])
+    # true aspect unless the map is a thin strip, which would vanish
+    aspect = "equal" if 0.1 <= height / width <= 10.0 else "auto"
+    data = np.ma.masked_invalid(surface.z / scale)
+    im = ax.imshow(
+        data,
+        extent=extent,
+        origin="upper",
+        aspect=aspect,
+        cmap="viridis",
+        interpolation="nearest",
+    )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
+    cb = fig.colorbar(im, ax=ax)
+    cb.set_label(f"height ({_UNIT_LABEL[unit]})")
+
+
+def plot_map(
+    surface: Surface,
+    path: str | os.PathLike[str],
+    *,
+    title: str | None = None,
+    unit: str = "nm",
+    dpi: int = 120,
+) -> Path:
+    """Write a height map image with a colour bar to a PNG file.
+
+    Parameters
+    ----------
+    surface : Surface
+        Height map in m (rows = y, row 0 at the top); NaN pixels are left blank.
+    path : str or path-like
+        Destination PNG file; its folder is created if needed.
+    title : str or None, default: None
+        Figure title.
+    unit : {"nm", "um"}, default: "nm"
+        Height unit of the colour bar.
+    dpi : int, default: 120
+        Resolution of the PNG, in dots per inch.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    ConfigError
+        If ``unit`` is unknown.
+
+    Notes
+    -----
+    Axes are in um when the map is calibrated, in pixels otherwise.
+    """
+    _unit(unit)
+    fig = _new_figure((6.0, 4.8))
+    ax = fig.add_subplot()
+    _draw_map(fig, ax, surface, unit, title)
+    return _save_atomic(fig, path, dpi)
+
+
+def plot_filtered_map(
+    surface: Surface,
+    filtered: Surface,
+    path: str | os.PathLike[str],
+    *,
+    cutoff: float | None = None,
+    title: str | None = None,
+    unit: str = "nm",
+    dpi: int = 120,
+) -> Path:
+    """Write a side-by-side PNG of a map and its filtered version.
+
+    Parameters
+    ----------
+    surface : Surface
+        Original height map, in m.
+    filtered : Surface
+        Filtered map (for example ``high_pass(surface, 1 / 80e3)``), in m.
+    path : str or path-like
+        Destination PNG file.
+    cutoff : float or None, default: None
+        Cut-off wavelength used, in m; shown in the right panel's title as a
+        spatial frequency in 1/mm and a wavelength in um.
+    title : str or None, default: None
+        Figure title.
+    unit : {"nm", "um"}, default: "nm"
+        Height unit of both colour bars.
+    dpi : int, default: 120
+        Resolution of the PNG, in dots per inch.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    ConfigError
+        If ``unit`` is unknown.
+    """
+    _unit(unit)
+    fig = _new_figure((11.0, 4.6))
+    ax1, ax2 = fig.subplots(1, 2)
+    _draw_map(fig, ax1, surface, unit, "original")
+    if cutoff is not None:
+        sub = (
+            f"filtered: {1e-3 / cutoff:.4g} mm\u207b\u00b9 "
+            f"({cutoff * 1e6:.4g} \u00b5m) cut-off"
+        )
+    else:
+        sub = "filtered"
+    _draw_map(fig, ax2, filtered, unit, sub)
+    if title:
+        fig.suptitle(title)
+    return _save_atomic(fig, path, dpi)
+
+
+def plot_profile_with_form_error(
+    x: np.ndarray,
+    z: np.ndarray,
+    z_nominal: np.ndarray,
+    err: np.ndarray,
+    path: str | os.PathLike[str],
+    *,
+    title: str | None = None,
+    dpi: int = 120,
+) -> Path:
+    """Write a two-panel PNG: profile with its nominal, and the form error.
+
+    Parameters
+    ----------
+    x : ndarray of shape (n,)
+        Positions along the profile, in m.
+    z : ndarray of shape (n,)
+        Measured heights, in m (shown in um).
+    z_nominal : ndarray of shape (n,)
+        Aligned nominal (reference) heights, in m (shown in um).
+    err : ndarray of shape (n,)
+        Form error ``z - z_nominal``, in m (shown in nm); NaN where not evaluated.
+    path : str or path-like
+        Destination PNG file.
+    title : str or None, default: None
+        Figure title.
+    dpi : int, default: 120
+        Resolution of the PNG, in dots per inch.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    ConfigError
+        If the arrays differ in length.
+    """
+    arrays = [np.asarray(a, dtype=float).ravel() for a in (x, z, z_nominal, err)]
+    if len({a.size for a in arrays}) != 1:
+        raise ConfigError(
+            "x, z, z_nominal and err must have the same length, got "
+            f"{[a.size for a in arrays]}"
+        )
+    x, z, zn, e = arrays
+    fig = _new_figure((7.0, 5.6))
+    ax1, ax2 = fig.subplots(2, 1, sharex=True)
+    ax1.plot(x * 1e6, z * 1e6, lw=1.0, label="measured")
+    ax1.plot(x * 1e6, zn * 1e6, lw=1.0, ls="--", label="nominal")
+    ax1.set_ylabel("height (\u00b5m)")
+    ax1.legend(loc="best")
+    ax2.plot(x * 1e6, e * 1e9, lw=1.0, color="C3")
+    ax2.axhline(0.0, color="0.5", lw=0.5)
+    if np.isfinite(e).any():
+        k = int(np.nanargmax(np.abs(e)))
+        ax2.plot([x[k] * 1e6], [e[k] * 1e9], "o", color="C3")
+        ax2.annotate(
+            f"max {abs(e[k]) * 1e9:.0f} nm",
+            (x[k] * 1e6, e[k] * 1e9),
+            textcoords="offset points",
+            xytext=(5, 5),
+        )
+    ax2.set_xlabel("x (\u00b5m)")
+    ax2.set_ylabel("form error (nm)")
+    if title:
+        fig.suptitle(title)
+    return _save_atomic(fig, path, dpi)
+
+
+def plot_spectrum(
+    freq: np.ndarray,
+    psd: np.ndarray,
+    peaks: Sequence[dict[str, Any]],
+    path: str | os.PathLike[str],
+    *,
+    speed: float | None = None,
+    title: str | None = None,
+    dpi: int = 120,
+) -> Path:
+    """Write a log-PSD plot against spatial frequency with labelled peaks.
+
+    Parameters
+    ----------
+    freq : ndarray of shape (m,)
+        Spatial frequency, in 1/m (shown in 1/mm).
+    psd : ndarray of shape (m,)
+        One-sided PSD, in m^3 (shown in nm^2 mm).
+    peaks : sequence of dict
+        Peaks from :func:`servosurf.metrology.find_peaks_spectrum` (uses
+        ``freq_per_m`` and ``psd_m3``); may be empty.
+    path : str or path-like
+        Destination PNG file.
+    speed : float or None, default: None
+        Surface speed in m/s; when given each label also shows the equivalent
+        temporal frequency ``freq * speed`` in kHz.
+    title : str or None, default: None
+        Figure title.
+    dpi : int, default: 120
+        Resolution of the PNG, in dots per inch.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    ConfigError
+        If ``freq`` and ``psd`` differ in shape or ``speed`` is not positive.
+    """
+    f = np.asarray(freq, dtype=float)
+    p = np.asarray(psd, dtype=float)
+    if f.shape != p.shape or f.ndim != 1:
+        raise ConfigError(
+            f"freq and psd must be 1-D of the same shape, got {f.shape} and {p.shape}"
+        )
+    if speed is not None and not (np.isfinite(speed) and speed > 0):
+        raise ConfigError(f"speed must be > 0 in m/s, got {speed!r}")
+    keep = (f > 0) & np.isfinite(p) & (p > 0)
+    fig = _new_figure((7.0, 4.4))
+    ax = fig.add_subplot()
+    ax.semilogy(f[keep] * 1e-3, p[keep] * 1e21, lw=1.0)
+    for pk in peaks:
+        fm = float(pk["freq_per_m"])
+        pm = float(pk.get("psd_m3", np.interp(fm, f, p)))
+        label = f"{fm * 1e-3:.0f} mm\u207b\u00b9"
+        if speed is not None:
+            label += f"\n{fm * speed * 1e-3:.2f} kHz"
+        ax.plot([fm * 1e-3], [pm * 1e21], "v", color="C3", ms=5)
+        ax.annotate(
+            label,
+            (fm * 1e-3, pm * 1e21),
+            textcoords="offset points",
+            xytext=(0, 8),
+            ha="center",
+            fontsize=8,
+        )
+    ax.set_xlabel("spatial frequency (mm\u207b\u00b9)")
+    ax.set_ylabel("PSD (nm\u00b2 mm)")
+    if title:
+        ax.set_title(title)
+    return _save_atomic(fig, path, dpi)
