@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# tests/reference/naive.py is imported as ``reference.naive`` by kernel tests
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 SHARED = Path(os.environ.get("SERVOSURF_SHARED", REPO.parent / "shared"))
 ZYGO = SHARED / "data" / "zygo"
 

@@ -25,6 +25,7 @@ COMMANDS = (
     "machines",
     "noise",
     "paper",
+    "identify",
     "simulate",
     "info",
     "convert",

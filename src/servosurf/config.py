@@ -307,15 +307,26 @@ def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
     """
     lines = [f"# {h}" for h in header.splitlines()] if header else []
 
-    def emit(table: Mapping[str, Any], path: str) -> None:
-        scalars = {k: v for k, v in table.items() if not isinstance(v, Mapping)}
+    def is_table_array(v: Any) -> bool:
+        return isinstance(v, list | tuple) and bool(v) and all(
+            isinstance(x, Mapping) for x in v)
+
+    def emit(table: Mapping[str, Any], path: str, array: bool = False) -> None:
+        scalars = {k: v for k, v in table.items()
+                   if not isinstance(v, Mapping) and not is_table_array(v)}
         subs = {k: v for k, v in table.items() if isinstance(v, Mapping)}
-        if path and scalars:
+        arrays = {k: v for k, v in table.items() if is_table_array(v)}
+        if array:
+            lines.append(f"\n[[{path}]]")
+        elif path and scalars:
             lines.append(f"\n[{path}]")
         for k, v in scalars.items():
             lines.append(f"{k} = {_toml_value(v)}")
         for k, v in subs.items():
             emit(v, f"{path}.{k}" if path else k)
+        for k, v in arrays.items():
+            for item in v:
+                emit(item, f"{path}.{k}" if path else k, array=True)
 
     emit(data, "")
     return "\n".join(lines).lstrip("\n") + "\n"

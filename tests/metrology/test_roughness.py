@@ -65,19 +65,20 @@ def test_nexview_ra_ends_kept(nexview):
     np.testing.assert_allclose(res["ra_m"], 14.6e-9, rtol=NEXVIEW_RTOL)
 
 
-def test_nexview_ra_reference_value_needs_a_whole_cutoff_trimmed(nexview):
-    # The shared reference (PAPER_NOTES, SOURCES.md) quotes Ra 13.19 nm "with ends
-    # of lambda_c / 2 trimmed". It is reproduced when lambda_c (80 um) is discarded
-    # at each end, i.e. the ISO run-up/run-out plus another lambda_c / 2.
-    res = profile_roughness(nexview, cutoff=80e-6, trim_length=80e-6)
+def test_nexview_ra_reference_value_default_trim(nexview):
+    # The shared reference quotes Ra 13.19 nm "with the ends trimmed". It is
+    # reproduced when lambda_c (80 um) is discarded at each end, servosurf's default.
+    res = profile_roughness(nexview, cutoff=80e-6)
+    assert res["ends_trimmed"] is True
+    np.testing.assert_allclose(res["trim_length_m"], 80e-6, rtol=1e-12)
     np.testing.assert_allclose(res["ra_m"], 13.19e-9, rtol=NEXVIEW_RTOL)
 
 
 def test_nexview_ra_iso_trim_golden(nexview):
-    # ISO 4288 run-up and run-out of lambda_c / 2 (the default). Golden value from
-    # this implementation, cross-checked with scipy.ndimage.gaussian_filter1d
+    # ISO 4288 run-up and run-out of lambda_c / 2 only. Golden value from this
+    # implementation, cross-checked with scipy.ndimage.gaussian_filter1d
     # (sigma = alpha lambda_c / sqrt(2 pi), any boundary mode): 14.019 nm.
-    res = profile_roughness(nexview, cutoff=80e-6)
+    res = profile_roughness(nexview, cutoff=80e-6, trim_length=40e-6)
     assert res["ends_trimmed"] is True
     np.testing.assert_allclose(res["trim_length_m"], 40e-6, rtol=1e-12)
     np.testing.assert_allclose(res["ra_m"], 14.019e-9, rtol=1e-3)

@@ -5,6 +5,20 @@ Needs the ``scale`` extra (``zarr``, ``dask[distributed]``), imported on use.
 
 from __future__ import annotations
 
-from ._face import FaceResult, chunk_slices, compute_tile, face_field, simulate_face
+from ._face import (
+    FaceResult,
+    IndexNoise,
+    chunk_slices,
+    compute_tile,
+    face_field,
+    simulate_face,
+)
 
-__all__ = ["simulate_face", "compute_tile", "face_field", "chunk_slices", "FaceResult"]
+__all__ = [
+    "simulate_face",
+    "compute_tile",
+    "face_field",
+    "chunk_slices",
+    "FaceResult",
+    "IndexNoise",
+]

@@ -26,7 +26,8 @@ from ..toolpath._sample import SampledPath, count_samples, field_reach, sample
 from ..toolpath._sweep import prepare_path, run_kernel
 from ..toolpath._tool import Field
 
-__all__ = ["face_field", "simulate_face", "compute_tile", "FaceResult", "chunk_slices"]
+__all__ = ["face_field", "simulate_face", "compute_tile", "FaceResult", "chunk_slices",
+           "IndexNoise"]
 
 #: Split a tile until its windowed path has at most this many samples (memory).
 MAX_TILE_SAMPLES = 4_000_000
@@ -73,6 +74,38 @@ def chunk_slices(shape: tuple[int, int], chunk: tuple[int, int]):
     cy, cx = chunk
     return [((r, min(r + cy, ny)), (c, min(c + cx, nx)))
             for r in range(0, ny, cy) for c in range(0, nx, cx)]
+
+
+@dataclass(frozen=True)
+class IndexNoise:
+    """Deterministic white height noise keyed on the global sample number.
+
+    A stand-in for a vibration realisation that tiles can evaluate independently:
+    sample k always gets the same deviation, whichever window it was sampled in.
+
+    Parameters
+    ----------
+    rms : float, default: 1e-9
+        RMS deviation, in m (uniform distribution of width rms * sqrt(12)).
+    seed : int, default: 0
+        Seed mixed into the hash.
+
+    Notes
+    -----
+    splitmix64 of (sample number + seed * golden ratio); not a PSD-shaped noise.
+    """
+
+    rms: float = 1e-9
+    seed: int = 0
+
+    def __call__(self, path: SampledPath) -> np.ndarray:
+        """Deviation in m for every sample of ``path``, shape (path.n,)."""
+        from ..kernels._paths import _index_noise
+
+        key = np.uint64((int(self.seed) * 0x9E3779B97F4A7C15) % 2**64)
+        out = np.empty(path.n)
+        _index_noise(path.t, float(path.fs), key, float(self.rms) * math.sqrt(12.0), out)
+        return out
 
 
 def _initial_tile(field, rows, cols, initial, face_radius):

@@ -1,5 +1,16 @@
 """Mechatronic model of the FTS: plant (Eqs 1-7), PIDF, tuning, closed loop."""
 
+from ._ident import (
+    DEFAULT_IDENT_PARAMS,
+    Identification,
+    fit_percent,
+    get_param,
+    identify,
+    open_loop_frf,
+    read_frf_csv,
+    set_param,
+    write_frf_csv,
+)
 from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, tune_pidf
 from ._machine import (
     Actuator,
@@ -19,5 +30,7 @@ __all__ = [
     "Actuator", "Controller", "Disturbances", "Machine", "Mechanics", "PSDModel",
     "Sensor", "builtin_machines", "describe_machine", "load_machine",
     "Plant", "paper_eq_frf", "plant_from_machine",
+    "DEFAULT_IDENT_PARAMS", "Identification", "fit_percent", "get_param", "identify",
+    "open_loop_frf", "read_frf_csv", "set_param", "write_frf_csv",
     "PIDF", "LoopFRF", "ServoLoop", "tune_pidf", "PATHS",
 ]

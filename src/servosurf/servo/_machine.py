@@ -252,6 +252,12 @@ class Machine:
             )
         return dataclasses.replace(self, disturbances=sets[name])
 
+    def to_toml(self, *, header: str = "") -> str:
+        """TOML text that :func:`load_machine` reads back to an equal machine."""
+        from ..config import dump_toml
+
+        return dump_toml(self.to_mapping(), header=header)
+
     def to_mapping(self) -> dict:
         """Kebab-case mapping suitable for TOML (see :func:`servosurf.config.dump_toml`)."""
         m = to_mapping(self)

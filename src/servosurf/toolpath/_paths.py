@@ -269,6 +269,14 @@ class FacingToolpath(_ConstantSpeedPath):
         """Deepest commanded point below z = 0, in m."""
         return self.depth_of_cut
 
+    def _fill(self, starts, stops, fs, t, theta, r, z) -> None:
+        """Write samples k in [starts[m], stops[m]) into t, theta, r, z (numba)."""
+        from ..kernels._paths import _sample_facing
+
+        _sample_facing(starts, stops, fs, self.theta0, self.angular_speed, self.r_start,
+                       self.feed_per_rev * self.spindle_speed, -self.depth_of_cut, t,
+                       theta, r, z)
+
 
 @dataclass(frozen=True)
 class LensletToolpath(_ConstantSpeedPath):
@@ -397,6 +405,15 @@ class LensletToolpath(_ConstantSpeedPath):
     def max_depth(self) -> float:
         """Deepest commanded point below z = 0, in m."""
         return self.depth_of_cut
+
+    def _fill(self, starts, stops, fs, t, theta, r, z) -> None:
+        """Write samples k in [starts[m], stops[m]) into t, theta, r, z (numba)."""
+        from ..kernels._paths import _sample_lenslet
+
+        _sample_lenslet(starts, stops, fs, self.theta0, self.angular_speed,
+                        self.frequency, self.amplitude, self.depth_of_cut,
+                        self.ring_radius, self.ring_pitch, self.ring_count,
+                        self.lenslets_per_ring, t, theta, r, z)
 
 
 @dataclass(frozen=True)

@@ -344,12 +344,11 @@ def sample(spec: ToolpathSpec | FacingToolpath | LensletToolpath, *,
             "field= or t_window= to sample only what a field needs, use a smaller "
             "reach, or raise max_samples"
         )
-    if starts.size == 1:
-        idx = np.arange(starts[0], stops[0], dtype=np.int64)
-    else:
-        idx = _ranges_to_index(starts, stops)
-        if idx.size > 1 and np.any(np.diff(idx) <= 0):  # overlapping windows
-            idx = np.unique(idx)
-    t = idx / fs
-    theta, r, z = path.evaluate(t)
+    if starts.size > 1 and np.any(starts[1:] < stops[:-1]):  # overlapping windows
+        idx = np.unique(_ranges_to_index(starts, stops))
+        starts, stops = idx, idx + 1
+    n = int((stops - starts).sum())
+    t, theta, r, z = (np.empty(n) for _ in range(4))
+    path._fill(np.ascontiguousarray(starts, dtype=np.int64),
+               np.ascontiguousarray(stops, dtype=np.int64), float(fs), t, theta, r, z)
     return SampledPath(t=t, theta=theta, r=r, z=z, fs=fs)

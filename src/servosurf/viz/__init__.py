@@ -12,6 +12,8 @@ _LAZY = {
     "plot_disturbance_frfs": "._servo_plots", "plot_cas": "._servo_plots",
     "plot_rms_vs_bandwidth": "._servo_plots", "plot_error_spectra": "._servo_plots",
     "plot_power_shares": "._servo_plots", "plot_loop_bode": "._servo_plots",
+    "plot_map": "._surface_plots", "plot_profile_with_form_error": "._surface_plots",
+    "plot_spectrum": "._surface_plots", "plot_filtered_map": "._surface_plots",
 }
 
 __all__ = sorted(_LAZY)
