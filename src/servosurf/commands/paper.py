@@ -41,10 +41,13 @@ def run(args) -> int:
         w = max(len(r["quantity"]) for r in table["rows"])
         for r in table["rows"]:
             mark = "ok  " if r["within"] else "MISS"
-            sv = r["servosurf"]
-            sv = f"{sv:.4g}" if isinstance(sv, float) else str(sv)
-            print(f"{mark} {r['quantity']:<{w}}  paper {r['paper']:<10g} servosurf {sv:<10} "
+            sv, pv = (f"{v:.4g}" if isinstance(v, float | int) else str(v)
+                      for v in (r["servosurf"], r["paper"]))
+            print(f"{mark} {r['quantity']:<{w}}  paper {pv:<10} servosurf {sv:<10} "
                   f"{r['unit']:<4} tol {r['tolerance']}")
+        for r in table.get("reported", []):
+            print(f"rep  {r['quantity']:<{w}}  paper {r['paper']:<10.4g} servosurf "
+                  f"{r['servosurf']:<10.4g} {r['unit']:<4} ({r['comment']})")
         for n in table["notes"]:
             print(f"note: {n}")
     return 0

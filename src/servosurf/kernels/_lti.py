@@ -35,7 +35,7 @@ def _segment_area(radius, depth):
 
 @njit(cache=_CACHE, fastmath=_FASTMATH)
 def _closed_loop_sim(ad, bd, cy, ac, bc, cc, dc, sens, nd, frac, r, f, i_n, s_n,
-                     chip_kind, chip_par, out):
+                     z_off, chip_kind, chip_par, out):
     """Simulate the discrete closed loop; fills ``out`` (5, n).
 
     Parameters
@@ -51,6 +51,9 @@ def _closed_loop_sim(ad, bd, cy, ac, bc, cc, dc, sens, nd, frac, r, f, i_n, s_n,
         Delay in samples: integer part and fraction.
     r, f, i_n, s_n : ndarray of shape (n,)
         Reference (m), external force (N), current noise (A), sensor noise (m).
+    z_off : ndarray of shape (n,)
+        Offset (m) added to x1 for the chip model only (the commanded path when the
+        loop is simulated about it, i.e. with tracking switched off).
     chip_kind : int
         0 no cutting; 1 plunge into a flat top: ``F += k_t * A(top - x1)``, with
         ``chip_par = [k_t (N/m^2), tool radius (m), top (m), unused]``.
@@ -97,7 +100,7 @@ def _closed_loop_sim(ad, bd, cy, ac, bc, cc, dc, sens, nd, frac, r, f, i_n, s_n,
             u_app += frac * reg[nd + 1]
         force = f[k]
         if chip_kind == 1:
-            force += chip_par[0] * _segment_area(chip_par[1], chip_par[2] - x1)
+            force += chip_par[0] * _segment_area(chip_par[1], chip_par[2] - x1 - z_off[k])
         for i in range(na):
             acc = bd[i, 0] * u_app + bd[i, 1] * i_n[k] + bd[i, 2] * force
             for j in range(na):

@@ -51,7 +51,8 @@ def _sample_facing(starts, stops, fs, theta0, omega, r_start, r_rate, z0, t, the
             ti = i * inv_fs
             t[k] = ti
             theta[k] = theta0 + omega * ti
-            r[k] = r_start - r_rate * ti
+            rk = r_start - r_rate * ti
+            r[k] = rk if rk > 0.0 else 0.0  # rounding at r_end = 0
             z[k] = z0
             k += 1
 

@@ -53,6 +53,10 @@ __all__ = [
     "SUF_RHI",
     "SUF_ZLO",
     "RMID",
+    "TH_LO",
+    "TH_HI",
+    "TH_FIRST",
+    "GSCALE",
     "_bucket_stats",
     "_sweep_exhaustive",
     "_sweep_pruned",
@@ -65,7 +69,8 @@ RLO, RHI, ZLO = 0, 1, 2
 PRE_RLO, PRE_RHI, PRE_ZLO = 3, 4, 5
 SUF_RLO, SUF_RHI, SUF_ZLO = 6, 7, 8
 RMID = 9
-N_STAT = 10
+TH_LO, TH_HI, TH_FIRST, GSCALE = 10, 11, 12, 13
+N_STAT = 16
 
 
 @njit(cache=CACHE, fastmath=FASTMATH)
@@ -89,8 +94,9 @@ def _bucket_stats(theta, r, z, gap, theta_ref, bidx, bstat):  # pragma: no cover
         bracket a target of bucket j (``theta[lo] <= target < theta[hi]`` for
         interior targets) and the first and last sample inside the bucket.
     bstat : ndarray of shape (n_buckets, N_STAT)
-        Output: r and z bounds over ``lo..hi`` (m), prefix and suffix hulls, and the
-        mid radius ``RMID`` (m).
+        Output: r and z bounds over ``lo..hi`` (m), prefix and suffix hulls, the
+        mid radius ``RMID`` (m), ``theta[lo]``, ``theta[hi]``, ``theta[first]`` (rad)
+        and the samples per rad ``GSCALE`` of the bucket (for the search guess).
 
     Notes
     -----
@@ -133,6 +139,12 @@ def _bucket_stats(theta, r, z, gap, theta_ref, bidx, bstat):  # pragma: no cover
         bstat[j, RHI] = rhi
         bstat[j, ZLO] = zlo
         bstat[j, RMID] = 0.5 * (rlo + rhi)
+        bstat[j, TH_LO] = theta[lo]
+        bstat[j, TH_HI] = theta[hi]
+        f0 = bidx[j, 2]
+        f1 = bidx[j, 3]
+        bstat[j, TH_FIRST] = theta[f0]
+        bstat[j, GSCALE] = (f1 - f0) / (theta[f1] - theta[f0]) if f1 > f0 else 0.0
     rlo = np.inf
     rhi = -np.inf
     zlo = np.inf
@@ -184,7 +196,7 @@ def _bisect(theta, target, lo, hi):  # pragma: no cover - numba
 
 
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
-def _height_at(i, target, rq, theta, r, z, gap, radius, half_width, wav, wav_s0,
+def _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
                wav_inv_ds):  # pragma: no cover - numba
     """Edge height over the query point for the crossing in interval i, in m.
 
@@ -196,10 +208,10 @@ def _height_at(i, target, rq, theta, r, z, gap, radius, half_width, wav, wav_s0,
         Crossing angle, in rad.
     rq : float
         Signed radius of the query point in the arc's plane, in m.
-    theta, r, z : ndarray of shape (n,)
-        Sampled path (rad, m, m).
-    gap : ndarray of shape (n,), bool
-        ``gap[i]`` is True when samples i and i + 1 are not consecutive in time.
+    pts : ndarray of shape (n, 4)
+        Interleaved path: theta (rad), r (m), z (m) and
+        ``1 / (theta[i + 1] - theta[i])`` (1/rad), which is 0.0 when samples i and
+        i + 1 are not consecutive in time (a gap) and for the last sample.
     radius : float
         Nose radius R, in m.
     half_width : float
@@ -214,19 +226,21 @@ def _height_at(i, target, rq, theta, r, z, gap, radius, half_width, wav, wav_s0,
     float
         Height in m, ``+inf`` when the interval is a gap or the point is beyond the arc.
     """
-    if gap[i]:
+    inv_dt = pts[i, 3]
+    if inv_dt == 0.0:
         return np.inf
-    t0 = theta[i]
-    a = (target - t0) / (theta[i + 1] - t0)
+    a = (target - pts[i, 0]) * inv_dt
     if a < 0.0:
         a = 0.0
     elif a > 1.0:
         a = 1.0
-    rc = r[i] + a * (r[i + 1] - r[i])
+    r0 = pts[i, 1]
+    rc = r0 + a * (pts[i + 1, 1] - r0)
     dr = rq - rc
     if abs(dr) > half_width:
         return np.inf
-    zc = z[i] + a * (z[i + 1] - z[i])
+    z0 = pts[i, 2]
+    zc = z0 + a * (pts[i + 1, 2] - z0)
     h = zc + (radius - np.sqrt(radius * radius - dr * dr))
     if wav.size > 1:
         u = (dr / radius - wav_s0) * wav_inv_ds
@@ -241,19 +255,21 @@ def _height_at(i, target, rq, theta, r, z, gap, radius, half_width, wav, wav_s0,
 
 
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
-def _locate_guided(theta, target, lo, hi, first, last):  # pragma: no cover - numba
+def _locate_guided(theta, pts, target, j, bidx, bstat):  # pragma: no cover - numba
     """Same result as :func:`_bisect` over the whole path, searched from a guess.
 
     Parameters
     ----------
     theta : ndarray of shape (n,)
         Strictly increasing angles, in rad.
+    pts : ndarray of shape (n, 4)
+        Interleaved path (theta in column 0).
     target : float
         Angle to bracket, in rad, with ``theta[0] <= target <= theta[-1]``.
-    lo, hi : int
-        The bucket's bracketing sample range (from :func:`_bucket_stats`).
-    first, last : int
-        The first and last sample inside the bucket.
+    j : int
+        Bucket of the target.
+    bidx, bstat : ndarray
+        Bucket ranges and statistics from :func:`_bucket_stats`.
 
     Returns
     -------
@@ -261,22 +277,21 @@ def _locate_guided(theta, target, lo, hi, first, last):  # pragma: no cover - nu
         Index i with ``theta[i] <= target < theta[i + 1]`` (``n - 2`` at the end).
     """
     n = theta.size
-    if target < theta[lo] or target >= theta[hi]:
+    if target < bstat[j, TH_LO] or target >= bstat[j, TH_HI]:
         return _bisect(theta, target, 0, n - 1)
+    lo = bidx[j, 0]
+    hi = bidx[j, 1]
     # Interpolation guess from the samples inside the bucket; uniform sampling lands
     # within one step.
-    g = first
-    if last > first:
-        g = first + int((target - theta[first]) * (last - first)
-                        / (theta[last] - theta[first]))
+    g = bidx[j, 2] + int((target - bstat[j, TH_FIRST]) * bstat[j, GSCALE])
     if g < lo:
         g = lo
     elif g > hi - 1:
         g = hi - 1
     for _ in range(4):
-        if theta[g] > target:
+        if pts[g, 0] > target:
             g -= 1
-        elif theta[g + 1] <= target:
+        elif pts[g + 1, 0] <= target:
             g += 1
         else:
             return g
@@ -284,7 +299,7 @@ def _locate_guided(theta, target, lo, hi, first, last):  # pragma: no cover - nu
 
 
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
-def _envelope_exhaustive(phi, rq, h0, theta, r, z, gap, bidx, bstat, theta_ref, radius,
+def _envelope_exhaustive(phi, rq, h0, theta, pts, bidx, bstat, theta_ref, radius,
                          half_width, wav, wav_s0, wav_inv_ds, wav_bound,
                          slack):  # pragma: no cover - numba
     """Minimum height over every revolution that can cut below ``h0``, in m.
@@ -297,8 +312,10 @@ def _envelope_exhaustive(phi, rq, h0, theta, r, z, gap, bidx, bstat, theta_ref, 
         Signed query radius (r_p, or -r_p for the mirror family), in m.
     h0 : float
         Pre-cut height at the point, in m.
-    theta, r, z, gap, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
-    wav_inv_ds : see :func:`_height_at` and :func:`_bucket_stats`.
+    theta : ndarray of shape (n,)
+        Path angle, in rad (contiguous, for binary searches).
+    pts, radius, half_width, wav, wav_s0, wav_inv_ds : see :func:`_height_at`.
+    bidx, bstat, theta_ref : see :func:`_bucket_stats`.
     wav_bound : float
         Upper bound of the waviness correction, in m (0 without waviness).
     slack : float
@@ -334,8 +351,8 @@ def _envelope_exhaustive(phi, rq, h0, theta, r, z, gap, bidx, bstat, theta_ref, 
         if target < t_first or target > t_last:
             continue
         i = _bisect(theta, target, 0, n - 1)
-        h = _height_at(i, target, rq, theta, r, z, gap, radius, half_width, wav,
-                       wav_s0, wav_inv_ds)
+        h = _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
+                       wav_inv_ds)
         if h < best:
             best = h
     return best
@@ -384,7 +401,7 @@ def _start_bucket(rq, bstat, direction, hint):  # pragma: no cover - numba
 
 
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
-def _envelope_pruned(phi, rq, h0, j0, theta, r, z, gap, bidx, bstat, theta_ref, radius,
+def _envelope_pruned(phi, rq, h0, j0, theta, pts, bidx, bstat, theta_ref, radius,
                      half_width, wav, wav_s0, wav_inv_ds, wav_bound,
                      slack):  # pragma: no cover - numba
     """Minimum height over the crossings that can be lowest, in m.
@@ -395,7 +412,7 @@ def _envelope_pruned(phi, rq, h0, j0, theta, r, z, gap, bidx, bstat, theta_ref, 
         Query angle (rad), signed query radius (m) and pre-cut height (m).
     j0 : int
         Start bucket (nearest radius).
-    theta, r, z, gap, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
+    theta, pts, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
     wav_inv_ds, wav_bound, slack : see :func:`_envelope_exhaustive`.
 
     Returns
@@ -432,10 +449,9 @@ def _envelope_pruned(phi, rq, h0, j0, theta, r, z, gap, bidx, bstat, theta_ref, 
         if d <= half_width and bstat[j, ZLO] + d * d * inv2r - wav_bound - slack < best:
             target = phi + TWO_PI * (m0 + j)
             if target >= t_first and target <= t_last:
-                i = _locate_guided(theta, target, bidx[j, 0], bidx[j, 1], bidx[j, 2],
-                                   bidx[j, 3])
-                h = _height_at(i, target, rq, theta, r, z, gap, radius, half_width,
-                               wav, wav_s0, wav_inv_ds)
+                i = _locate_guided(theta, pts, target, j, bidx, bstat)
+                h = _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
+                               wav_inv_ds)
                 if h < best:
                     best = h
         j += 1
@@ -450,10 +466,9 @@ def _envelope_pruned(phi, rq, h0, j0, theta, r, z, gap, bidx, bstat, theta_ref, 
         if d <= half_width and bstat[j, ZLO] + d * d * inv2r - wav_bound - slack < best:
             target = phi + TWO_PI * (m0 + j)
             if target >= t_first and target <= t_last:
-                i = _locate_guided(theta, target, bidx[j, 0], bidx[j, 1], bidx[j, 2],
-                                   bidx[j, 3])
-                h = _height_at(i, target, rq, theta, r, z, gap, radius, half_width,
-                               wav, wav_s0, wav_inv_ds)
+                i = _locate_guided(theta, pts, target, j, bidx, bstat)
+                h = _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
+                               wav_inv_ds)
                 if h < best:
                     best = h
         j -= 1
@@ -461,18 +476,19 @@ def _envelope_pruned(phi, rq, h0, j0, theta, r, z, gap, bidx, bstat, theta_ref, 
 
 
 @njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
-def _sweep_exhaustive(theta, r, z, gap, bidx, bstat, theta_ref, radius, half_width,
+def _sweep_exhaustive(theta, pts, bidx, bstat, theta_ref, radius, half_width,
                       wav, wav_s0, wav_inv_ds, wav_bound, slack, mirror_rmax, x0, dx,
                       col0, y0, dy, row0, out):  # pragma: no cover - numba
     """Lower envelope of the swept arc on a grid, every reaching revolution evaluated.
 
     Parameters
     ----------
-    theta, r, z : ndarray of shape (n,)
-        Sampled path: unwrapped tool angle in the workpiece frame (rad, strictly
-        increasing), tool-tip radius (m), tool-tip height (m, up = away from the work).
-    gap : ndarray of shape (n,), bool
-        True where samples i and i + 1 are not consecutive in time.
+    theta : ndarray of shape (n,)
+        Unwrapped tool angle in the workpiece frame, rad, strictly increasing.
+    pts : ndarray of shape (n, 4)
+        The same path interleaved: theta (rad), tool-tip radius r (m), tool-tip
+        height z (m, up = away from the work) and the inverse angle step to the next
+        sample (1/rad; 0.0 across gaps, where samples are not consecutive in time).
     bidx, bstat : ndarray
         Bucket ranges and bounds from :func:`_bucket_stats`.
     theta_ref : float
@@ -516,11 +532,11 @@ def _sweep_exhaustive(theta, r, z, gap, bidx, bstat, theta_ref, radius, half_wid
             x = x0 + (col0 + col) * dx
             rp = np.sqrt(x * x + y * y)
             phi = np.arctan2(y, x)
-            best = _envelope_exhaustive(phi, rp, h0, theta, r, z, gap, bidx, bstat,
+            best = _envelope_exhaustive(phi, rp, h0, theta, pts, bidx, bstat,
                                         theta_ref, radius, half_width, wav, wav_s0,
                                         wav_inv_ds, wav_bound, slack)
             if rp <= mirror_rmax:
-                hm = _envelope_exhaustive(phi + np.pi, -rp, h0, theta, r, z, gap, bidx,
+                hm = _envelope_exhaustive(phi + np.pi, -rp, h0, theta, pts, bidx,
                                           bstat, theta_ref, radius, half_width, wav,
                                           wav_s0, wav_inv_ds, wav_bound, slack)
                 if hm < best:
@@ -529,14 +545,14 @@ def _sweep_exhaustive(theta, r, z, gap, bidx, bstat, theta_ref, radius, half_wid
 
 
 @njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
-def _sweep_pruned(theta, r, z, gap, bidx, bstat, theta_ref, radius, half_width, wav,
+def _sweep_pruned(theta, pts, bidx, bstat, theta_ref, radius, half_width, wav,
                   wav_s0, wav_inv_ds, wav_bound, slack, mirror_rmax, direction, x0, dx,
                   col0, y0, dy, row0, out):  # pragma: no cover - numba
     """Lower envelope of the swept arc on a grid, pruned by per-revolution bounds.
 
     Parameters
     ----------
-    theta, r, z, gap, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
+    theta, pts, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
     wav_inv_ds, wav_bound, slack, mirror_rmax, x0, dx, col0, y0, dy, row0, out
         As for :func:`_sweep_exhaustive`.
     direction : int
@@ -563,12 +579,12 @@ def _sweep_pruned(theta, r, z, gap, bidx, bstat, theta_ref, radius, half_width, 
             rp = np.sqrt(x * x + y * y)
             phi = np.arctan2(y, x)
             hint = _start_bucket(rp, bstat, direction, hint)
-            best = _envelope_pruned(phi, rp, h0, hint, theta, r, z, gap, bidx, bstat,
+            best = _envelope_pruned(phi, rp, h0, hint, theta, pts, bidx, bstat,
                                     theta_ref, radius, half_width, wav, wav_s0,
                                     wav_inv_ds, wav_bound, slack)
             if rp <= mirror_rmax:
                 hint_m = _start_bucket(-rp, bstat, direction, hint_m)
-                hm = _envelope_pruned(phi + np.pi, -rp, best, hint_m, theta, r, z, gap,
+                hm = _envelope_pruned(phi + np.pi, -rp, best, hint_m, theta, pts,
                                       bidx, bstat, theta_ref, radius, half_width, wav,
                                       wav_s0, wav_inv_ds, wav_bound, slack)
                 if hm < best:

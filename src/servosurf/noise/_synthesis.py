@@ -22,6 +22,9 @@ __all__ = [
     "Realisation",
 ]
 
+#: Above this many frequency bins, realisations interpolate the FRFs from a dense grid.
+_DENSE_LIMIT = 120_000
+
 #: Stochastic sources (Table 1) with the loop input each enters at and its unit.
 SOURCES = {
     "sensor_noise": ("sensor_noise", "m^2/Hz"),
@@ -170,13 +173,14 @@ class Realisation:
 
 
 def realise(loop: ServoLoop, n: int, *, seed: int, disturbances: Disturbances | None = None,
-            fmin: float | None = None) -> Realisation:
+            fmin: float | None = None, sources: bool = False) -> Realisation:
     """Draw a seeded realisation of the real and following errors.
 
     Each disturbance is drawn as a Gaussian series with its PSD (random complex
     Fourier coefficients of variance ``W N fs / 2``), then passed through the
     closed-loop FRFs, so the tool error and the following error share the same
-    disturbances. The series is periodic with period ``n / fs``.
+    disturbances. The series is drawn on the next FFT-friendly length ``m >= n``
+    (periodic with period ``m / fs``) and its first ``n`` samples are returned.
 
     Parameters
     ----------
@@ -191,6 +195,8 @@ def realise(loop: ServoLoop, n: int, *, seed: int, disturbances: Disturbances | 
     fmin : float, optional
         Frequencies below ``fmin`` (Hz) carry no power; default ``fs / 4096`` like
         :func:`frequency_grid`, so the RMS matches the synthesised CAS.
+    sources : bool, default: False
+        Also return the disturbance time series (three more inverse FFTs).
 
     Returns
     -------
@@ -203,20 +209,41 @@ def realise(loop: ServoLoop, n: int, *, seed: int, disturbances: Disturbances | 
     fmin = fs / 4096 if fmin is None else check_positive(fmin, name="fmin")
     d = disturbances if disturbances is not None else loop.machine.disturbances
     rng = np.random.default_rng(seed)
-    f = np.fft.rfftfreq(n, 1.0 / fs)
-    band = (f >= fmin) & (f < fs / 2)
+    m = sp.fft.next_fast_len(int(n), real=True)
+    f = np.fft.rfftfreq(m, 1.0 / fs)
+    # the band fmin <= f < fs/2 is a contiguous slice of the rfft bins
+    i0 = int(np.searchsorted(f, fmin))
+    i1 = int(np.searchsorted(f, fs / 2.0))
+    band = slice(i0, i1)
     fb = f[band]
-    frf = loop.frf(fb)
+    if fb.size > _DENSE_LIMIT:
+        # long series: FRFs from a dense log grid (spacing < 0.02 %), interpolated
+        fd = np.geomspace(fb[0], fb[-1], _DENSE_LIMIT // 2)
+        dense = loop.frf(fd).paths
+        lf, lfd = np.log(fb), np.log(fd)
+
+        def path(key):
+            h = dense[key]
+            return np.interp(lf, lfd, h.real) + 1j * np.interp(lf, lfd, h.imag)
+    else:
+        paths = loop.frf(fb).paths
+
+        def path(key):
+            return paths[key]
+
     tool = np.zeros(f.size, dtype=complex)
     fol = np.zeros(f.size, dtype=complex)
-    sources = {}
+    series = {}
     for name, (inp, _unit) in SOURCES.items():
         w = evaluate_psd(getattr(d, name), fb)
-        g = (rng.standard_normal(fb.size) + 1j * rng.standard_normal(fb.size)) / np.sqrt(2)
-        x = np.zeros(f.size, dtype=complex)
-        x[band] = np.sqrt(w * n * fs / 2.0) * g
-        sources[name] = np.fft.irfft(x, n)
-        tool[band] += frf.paths[(inp, "tool")] * x[band]
-        fol[band] += frf.paths[(inp, "following_error")] * x[band]
-    return Realisation(fs=fs, tool=np.fft.irfft(tool, n), following=np.fft.irfft(fol, n),
-                       sources=sources)
+        # complex normal with E|g|^2 = 1: interleaved real/imag standard normals
+        g = rng.standard_normal(2 * fb.size).view(np.complex128)
+        xb = np.sqrt(w * (m * fs / 4.0)) * g
+        if sources:
+            x = np.zeros(f.size, dtype=complex)
+            x[band] = xb
+            series[name] = sp.fft.irfft(x, m, workers=-1)[:n]
+        tool[band] += path((inp, "tool")) * xb
+        fol[band] += path((inp, "following_error")) * xb
+    return Realisation(fs=fs, tool=sp.fft.irfft(tool, m, workers=-1)[:n],
+                       following=sp.fft.irfft(fol, m, workers=-1)[:n], sources=series)

@@ -156,7 +156,9 @@ def paper_table(groups: tuple[str, ...] | None = None, *, machine=None,
     Returns
     -------
     dict
-        ``{"rows": [...], "notes": [...]}``.
+        ``{"rows": [...], "notes": [...], "reported": [...]}``; ``reported`` holds
+        numbers the paper gives without a pass/fail tolerance (measured values the
+        model is not expected to reach, such as the flat-face Ra).
     """
     from contextlib import nullcontext
 
@@ -169,4 +171,99 @@ def paper_table(groups: tuple[str, ...] | None = None, *, machine=None,
             r, n = GROUPS[name](ctx)
         rows.extend(x.as_dict() for x in r)
         notes.extend(n)
-    return {"rows": rows, "notes": notes}
+    return {"rows": rows, "notes": notes, "reported": ctx.get("reported", [])}
+
+
+def _nearest(values: list[float], target: float) -> float:
+    return min(values, key=lambda v: abs(v - target)) if values else float("nan")
+
+
+#: Field used for the flat-face roughness rows: 200 x 200 pixels at 0.55 um (a
+#: 110 um square, 55 feed marks), small enough to keep `servosurf paper` quick.
+FLAT_FIELD_PIXELS = 200
+
+
+@row_group("surface")
+def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
+    """Rows of the lenslet and flat cuts (paper sections 4.2, 5.3, Table 2)."""
+    import dataclasses
+    from pathlib import Path
+
+    from ..simulation import simulate
+    from ..toolpath import load_toolpath
+    from ._simulation import analyse
+
+    machine = ctx.get("machine")
+    here = Path(__file__).resolve()
+    tp_dir = ctx.get("toolpaths") or next(
+        (p / "toolpaths" for p in here.parents if (p / "toolpaths").is_dir()), None)
+    if tp_dir is None:
+        return [], ["surface rows skipped: toolpaths/ folder not found"]
+    rows: list[Row] = []
+    notes: list[str] = []
+    reported = ctx.setdefault("reported", [])
+    setup = "1448 Hz crossover, 0.175 kg, seed 0"
+    kw = {"machine": machine, "bandwidth": 1448.0, "mass": 0.175, "seed": 0}
+    r5 = simulate(tp_dir / "lenslet_5um.toml", **kw)
+    a5 = analyse(r5)
+    pk = a5["spectrum_peaks_per_m"][:3]
+    for paper in (170e3, 255e3):
+        rows.append(rel_row(f"5 um lenslet spectral peak near {paper / 1e3:g} mm^-1", paper,
+                            _nearest(pk, paper), "1/m", 0.05, setup))
+    notes.append(
+        "The paper's own numbers disagree on the second vibration: its model puts the "
+        "real-error peaks at 7.4 and 11.7 kHz (Fig. 13c), which at 42.3 mm/s are 175 and "
+        "277 mm^-1, while its 5 um surface shows 170 and 255 mm^-1 (7.2 and 10.8 kHz) "
+        "and its 10 um surface 6.6 and 11.5 kHz. servosurf keeps the 7.4/11.7 kHz modes "
+        f"of section 5.2; its 5 um surface peaks are "
+        f"{', '.join(f'{p / 1e3:.0f}' for p in pk)} mm^-1.")
+    rows.append(rel_row("5 um lenslet: max tool deviation from the cutting force", 295e-9,
+                        a5["deviation_max_m"], "m", 0.15, setup + " (Fig. 17b)"))
+    rows.append(Row("5 um lenslet: deviation peak lags the force peak", "lags",
+                    a5["deviation_lag_s"], "s", "> 0", bool(a5["deviation_lag_s"] > 0), setup))
+    rows.append(rel_row("5 um lenslet: overshoot after the cut (paper simulation)", 180e-9,
+                        a5["deviation_overshoot_m"], "m", 0.30, setup))
+    reported.append({"quantity": "5 um lenslet: overshoot after the cut (paper measured)",
+                     "paper": 34e-9, "servosurf": a5["deviation_overshoot_m"], "unit": "m",
+                     "comment": "the measured 34 nm is a following error, in which the "
+                                "sensor sees the carrier (m2), not the tool"})
+    rows.append(rel_row("5 um lenslet: maximum form error", 200e-9, a5["form_error_max_m"],
+                        "m", 0.30, setup + ", reference = air-cut amplitude"))
+    rows.append(Row("5 um lenslet: maximum form error lags the deepest point", "lags",
+                    a5["form_error_lag_m"], "m", "> 0", bool(a5["form_error_lag_m"] > 0),
+                    setup))
+    r10 = simulate(tp_dir / "lenslet_10um.toml", **kw)
+    a10 = analyse(r10)
+    hz10 = a10["spectrum_peaks_hz"][:3]
+    for paper in (6.6e3, 11.5e3):
+        rows.append(rel_row(f"10 um lenslet vibration peak near {paper / 1e3:g} kHz", paper,
+                            _nearest(hz10, paper), "Hz", 0.15,
+                            setup + f", {a10['surface_speed_m_per_s'] * 1e3:.1f} mm/s"))
+    notes.append("10 um lenslet peaks are compared within 15 %: the paper's own two "
+                 "lenslets put the same first mode 11 % apart (7.2 and 6.6 kHz).")
+    # flat face: roughness by model part (no fudge term)
+    spec = load_toolpath(tp_dir / "flat_facing.toml")
+    fld = dataclasses.replace(spec.field, nx=FLAT_FIELD_PIXELS, ny=FLAT_FIELD_PIXELS)
+    spec = dataclasses.replace(spec, field=fld)
+    feed, rad = spec.path.feed_per_rev, spec.tool.nose_radius
+    ra_kin = feed**2 / (18 * np.sqrt(3) * rad)
+    parts_sets = {"kinematic": (), "kinematic+force": ("tracking", "force"),
+                  "kinematic+vibration": ("tracking", "vibration"),
+                  "all": ("tracking", "force", "vibration")}
+    ra = {}
+    for name, parts in parts_sets.items():
+        res = simulate(spec, parts=parts, **kw)
+        ra[name] = analyse(res)["ra_m"]
+    rows.append(rel_row("flat face Ra, kinematic only, vs f^2/(18 sqrt(3) R)", ra_kin,
+                        ra["kinematic"], "m", 0.01, "2 um/rev, R 0.5 mm"))
+    for name, v in ra.items():
+        reported.append({"quantity": f"flat face Ra, model parts: {name}", "paper": 1.2e-9,
+                         "servosurf": v, "unit": "m",
+                         "comment": "paper: measured, no filter; no fudge term added"})
+    notes.append(
+        f"Flat Ra: kinematic {ra['kinematic'] * 1e9:.3f} nm, +force "
+        f"{ra['kinematic+force'] * 1e9:.3f} nm, +vibration "
+        f"{ra['kinematic+vibration'] * 1e9:.3f} nm, all {ra['all'] * 1e9:.3f} nm against "
+        "1.2 nm measured: the gap is physics the model leaves out (material side flow, "
+        "elastic recovery, tool edge, spindle), for `servosurf diagnose` to locate.")
+    return rows, notes

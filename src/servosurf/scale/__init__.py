@@ -13,6 +13,7 @@ from ._face import (
     face_field,
     simulate_face,
 )
+from ._memory import reuse_freed_memory
 
 __all__ = [
     "simulate_face",
@@ -21,4 +22,5 @@ __all__ = [
     "chunk_slices",
     "FaceResult",
     "IndexNoise",
+    "reuse_freed_memory",
 ]

@@ -25,6 +25,7 @@ from ..toolpath._paths import ToolpathSpec
 from ..toolpath._sample import SampledPath, count_samples, field_reach, sample
 from ..toolpath._sweep import prepare_path, run_kernel
 from ..toolpath._tool import Field
+from ._memory import reuse_freed_memory
 
 __all__ = ["face_field", "simulate_face", "compute_tile", "FaceResult", "chunk_slices",
            "IndexNoise"]
@@ -104,7 +105,8 @@ class IndexNoise:
 
         key = np.uint64((int(self.seed) * 0x9E3779B97F4A7C15) % 2**64)
         out = np.empty(path.n)
-        _index_noise(path.t, float(path.fs), key, float(self.rms) * math.sqrt(12.0), out)
+        scale = float(self.rms) * math.sqrt(12.0)
+        _index_noise(path.t, float(path.fs), key, scale, out)
         return out
 
 
@@ -153,8 +155,9 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
     fs : float, optional
         Sampling rate in Hz (default 199.6 kHz).
     max_tile_samples : int, default: 4_000_000
-        Tiles whose windowed path would be longer are split in four (near the axis
-        every revolution crosses the tile at all angles).
+        Tiles whose windowed path would be longer are computed in several time
+        windows, carrying the running minimum (near the axis every revolution
+        crosses the tile at all angles).
     n_threads : int, optional
         Numba threads.
 
@@ -164,7 +167,7 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
         Heights in m.
     stats : dict
         ``n_samples`` (samples generated), ``n_points`` (pixels computed),
-        ``n_subtiles``.
+        ``n_subtiles`` (time windows).
     """
     from ..toolpath._sample import FS_DEFAULT
 
@@ -183,23 +186,23 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
         depth = top + spec.path.max_depth
         reach = field_reach(tool, depth, depth_margin=depth_margin)
         z_floor = -(spec.path.max_depth + depth_margin)
-    stack = [(rows, cols)]
-    while stack:
-        (r0, r1), (c0, c1) = stack.pop()
-        sub = out[r0 - rows[0]:r1 - rows[0], c0 - cols[0]:c1 - cols[0]]
-        if not np.any(~np.isnan(sub)):
-            continue
-        sf = field.subfield(r0, r1, c0, c1)
-        n = count_samples(spec, fs=fs, field=sf, reach=reach)
-        if n > max_tile_samples and (r1 - r0 > 16 or c1 - c0 > 16):
-            rm = (r0 + r1) // 2 if r1 - r0 > 16 else r1
-            cm = (c0 + c1) // 2 if c1 - c0 > 16 else c1
-            for rr in ((r0, rm), (rm, r1)):
-                for cc in ((c0, cm), (cm, c1)):
-                    if rr[1] > rr[0] and cc[1] > cc[0]:
-                        stack.append((rr, cc))
-            continue
-        path = sample(spec, fs=fs, field=sf, reach=reach, max_samples=max(n, 1))
+    sf = field.subfield(rows[0], rows[1], cols[0], cols[1])
+    n = count_samples(spec, fs=fs, field=sf, reach=reach)
+    windows: list[tuple[float, float] | None] = [None]
+    if n > max_tile_samples:
+        # Near the axis every revolution crosses the tile at all angles: sample the
+        # tile's time span in pieces and carry the running minimum (the envelope is a
+        # minimum, so this is exact; neighbouring pieces share their end samples).
+        rmin, rmax = sf.radial_range()
+        span = spec.path.time_span_for_radius(rmin - reach, rmax + reach)
+        if span is not None:
+            k = math.ceil(n / max_tile_samples)
+            edges = np.linspace(span[0], span[1], k + 1)
+            windows = [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:],
+                                                           strict=True)]
+    for win in windows:
+        path = sample(spec, fs=fs, field=sf, reach=reach, t_window=win,
+                      max_samples=max(2 * max_tile_samples, n if win is None else 0, 1))
         stats["n_samples"] += path.n
         stats["n_subtiles"] += 1
         if path.n < 2:
@@ -212,12 +215,11 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
                 f"the commanded depth plus depth_margin ({depth_margin:g} m); raise "
                 "depth_margin"
             )
-        prep = prepare_path(path, tool, field, rows=(r0, r1), cols=(c0, c1), crop=False)
+        prep = prepare_path(path, tool, field, rows=rows, cols=cols, crop=False)
         if prep is None:
             continue
-        buf = np.ascontiguousarray(sub)
-        run_kernel(prep, tool, field, buf, n_threads=n_threads, row0=r0, col0=c0)
-        sub[...] = buf
+        run_kernel(prep, tool, field, out, n_threads=n_threads, row0=rows[0],
+                   col0=cols[0])
     return out, stats
 
 
@@ -233,6 +235,7 @@ def _open_array(store, shape, chunk, mode):
 
 def _chunk_task(spec, field, rows, cols, store, kwargs):
     """Dask task: compute one chunk and write it into the Zarr store at ``store``."""
+    reuse_freed_memory()
     t0 = time.perf_counter()
     z, stats = compute_tile(spec, field, rows, cols, **kwargs)
     arr = _open_array(store, None, None, "r+")
@@ -330,6 +333,8 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
     -----
     Peak memory is one chunk of output plus one windowed path (at most
     ``max_tile_samples`` samples, about 50 bytes each while sampling) per worker.
+    The run calls :func:`reuse_freed_memory` (glibc heap thresholds) in each process
+    so that tile buffers are reused instead of page-faulted in again.
     """
     check_no_kwargs(kwargs, name="simulate_face")
     if not isinstance(spec, ToolpathSpec):
@@ -343,6 +348,7 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
     if isinstance(store, Path):
         store = str(store)
     t0 = time.perf_counter()
+    reuse_freed_memory()
     arr = _open_array(store, field.shape, chunk, "w")
     tasks = chunk_slices(field.shape, chunk)
     kw = dict(initial=initial, face_radius=face_radius, deviation=deviation,

@@ -431,6 +431,7 @@ class ServoLoop:
         sensor_noise: np.ndarray | None = None,
         n: int | None = None,
         chip=None,
+        chip_offset: np.ndarray | None = None,
     ) -> dict[str, np.ndarray]:
         """Simulate the exact discrete closed loop sample by sample.
 
@@ -449,6 +450,9 @@ class ServoLoop:
         chip : ChipModel, optional
             Force computed at each step from the actual tool position (cutting);
             added to ``force``. See :class:`servosurf.cutting.ChipModel`.
+        chip_offset : ndarray of shape (n,), optional
+            Height in m added to the simulated x1 before the chip model sees it (use
+            the commanded path when simulating deviations about it).
 
         Returns
         -------
@@ -470,7 +474,8 @@ class ServoLoop:
             if a.shape != (n,):
                 raise ModelError(f"input arrays must all have shape ({n},), got {a.shape}")
             return a
-        r, f, i_n, s_n = map(prep, (reference, force, current_noise, sensor_noise))
+        r, f, i_n, s_n, z_off = map(prep, (reference, force, current_noise, sensor_noise,
+                                           chip_offset))
         ad, bd, cy, ac, bc, cc, dc = self.discrete_models()
         nd, frac = self._delay_split()
         if chip is None:
@@ -480,7 +485,7 @@ class ServoLoop:
         out = np.zeros((5, n))
         _closed_loop_sim(ad, bd, cy, ac, bc, cc.ravel().copy(), float(dc.ravel()[0]),
                          self.machine.sensor.sensitivity, nd, frac, r, f, i_n, s_n,
-                         chip_kind, chip_par, out)
+                         z_off, chip_kind, chip_par, out)
         return {"tool": out[0], "sensor": out[1], "following_error": out[2],
                 "u": out[3], "force": out[4]}
 

@@ -55,7 +55,8 @@ def lenslet_chord(nose_radius: float, depth: float) -> float:
     R = float(nose_radius)
     d = float(depth)
     if not (R > 0 and 0 <= d <= R):
-        raise ConfigError(f"depth must be in [0, nose_radius], got {d!r} m (R = {R!r} m)")
+        raise ConfigError(
+            f"depth must be in [0, nose_radius], got {d!r} m (R = {R!r} m)")
     return 2.0 * math.sqrt(2.0 * R * d - d * d)
 
 
@@ -168,7 +169,8 @@ class _ConstantSpeedPath:
         t = np.asarray(t, dtype=float)
         return self.theta_at(t), self.radius_at(t), self.z_at(t)  # type: ignore[attr-defined]
 
-    def time_span_for_radius(self, rlo: float, rhi: float) -> tuple[float, float] | None:
+    def time_span_for_radius(self, rlo: float,
+                             rhi: float) -> tuple[float, float] | None:
         """Time interval during which the tool radius is within [rlo, rhi].
 
         Parameters
@@ -463,7 +465,8 @@ def _pop_alias(table: dict[str, Any], key: str, alias: str, scale: float,
             raise ConfigError(f"{prefix}: give either {key!r} or {alias!r}, not both")
         v = table.pop(alias)
         if isinstance(v, bool) or not isinstance(v, int | float):
-            raise ConfigError(f"{prefix}.{alias}: expected float, got {type(v).__name__}")
+            raise ConfigError(
+                f"{prefix}.{alias}: expected float, got {type(v).__name__}")
         table[key] = float(v) * scale
 
 

@@ -55,8 +55,8 @@ class SampledPath:
         for name in ("t", "theta", "r", "z"):
             a = np.ascontiguousarray(getattr(self, name), dtype=np.float64)
             if a.ndim != 1:
-                raise ConfigError(f"SampledPath.{name} must be 1-dimensional, got shape "
-                                  f"{a.shape}")
+                raise ConfigError(
+                    f"SampledPath.{name} must be 1-dimensional, got shape {a.shape}")
             if n is None:
                 n = a.size
             elif a.size != n:
@@ -124,7 +124,8 @@ class SampledPath:
         """
         dz = np.asarray(dz, dtype=np.float64)
         if dz.shape != self.z.shape:
-            raise ConfigError(f"deviation must have shape {self.z.shape}, got {dz.shape}")
+            raise ConfigError(
+                f"deviation must have shape {self.z.shape}, got {dz.shape}")
         return self.with_z(self.z + dz)
 
     def select(self, mask: np.ndarray) -> SampledPath:
@@ -196,7 +197,8 @@ def _ranges_to_index(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=np.int64)
     keep = lengths > 0
     starts, lengths = starts[keep], lengths[keep]
-    offsets = np.repeat(starts - np.concatenate(([0], np.cumsum(lengths)[:-1])), lengths)
+    before = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+    offsets = np.repeat(starts - before, lengths)
     return np.arange(total, dtype=np.int64) + offsets
 
 

@@ -47,21 +47,22 @@ def check_clearance(path: SampledPath, tool: Tool, *, stacklevel: int = 2) -> fl
     Intervals within one nose radius of the spindle axis are skipped: there the
     cutting speed vanishes and any height change exceeds every clearance angle.
     """
+    from ..kernels._prep import _max_slope
+
     if path.n < 2:
         return 0.0
-    s = path.slope_along_cut()
-    rm = 0.5 * (path.r[1:] + path.r[:-1])
-    s = np.where(rm >= tool.nose_radius, np.abs(s), np.nan)
-    if not np.any(np.isfinite(s)):
+    slope, k = _max_slope(path.t, path.theta, path.r, path.z, path.fs,
+                          tool.nose_radius)
+    if k < 0:
         return 0.0
-    k = int(np.nanargmax(s))
-    angle = math.atan(float(s[k]))
+    rm = 0.5 * (path.r[k] + path.r[k + 1])
+    angle = math.atan(float(slope))
     if angle > tool.clearance_angle:
         warnings.warn(
             ToolpathWarning(
                 f"toolpath slope along the cutting direction reaches "
                 f"{math.degrees(angle):.2f} degrees (at t = {path.t[k]:.6g} s, r = "
-                f"{rm[k]:.6g} m), above the tool clearance angle of "
+                f"{rm:.6g} m), above the tool clearance angle of "
                 f"{math.degrees(tool.clearance_angle):.2f} degrees: the flank would "
                 "rub the cut surface. Lower the surface speed or the amplitude, or use "
                 "a tool with more clearance."
@@ -89,7 +90,12 @@ class PreparedPath:
         self.theta = path.theta
         self.r = path.r
         self.z = path.z
-        self.gap = np.ascontiguousarray(path.gaps())
+        from ..kernels._prep import _interleave
+
+        # interleaved copy for the crossing evaluations: one cache line per sample pair
+        self.pts = np.empty((path.n, 4))
+        self.gap = np.empty(path.n, dtype=np.bool_)
+        _interleave(path.t, path.theta, path.r, path.z, path.fs, self.pts, self.gap)
         self.theta_ref = float(theta_ref)
         nb = int(math.floor((self.theta[-1] - self.theta_ref) / (2 * math.pi))) + 1
         self.bidx = np.zeros((nb, 4), dtype=np.int64)
@@ -138,27 +144,19 @@ def _rect_polar(xmin, xmax, ymin, ymax, reach):
 
 def _crop(path: SampledPath, rmin: float, rmax: float, window, reach: float):
     """Keep the intervals that can cut the rectangle (both of their samples)."""
-    th, r = path.theta, path.r
+    from ..kernels._prep import _crop_mask
+
     if path.n < 2:
         return path
-    rlo = np.minimum(r[:-1], r[1:])
-    rhi = np.maximum(r[:-1], r[1:])
-    reach = reach + 1e-9  # 1 nm: rounding allowance, keeps every touching interval
-    hit = (rlo <= rmax + reach) & (rhi >= rmin - reach)
-    hit |= rlo <= reach - rmin  # the arc across the axis
-    if window is not None:
+    keep = np.empty(path.n, dtype=np.bool_)
+    if window is None:
+        centre, lo, hi = 0.0, -math.pi, math.pi
+    else:
         centre, lo, hi = window
-        lo, hi = lo - 1e-9, hi + 1e-9  # rad, rounding allowance of rel
-        two_pi = 2.0 * math.pi
-        rel = np.mod(th[:-1] - centre + math.pi, two_pi) - math.pi
-        dth = np.diff(th)
-        ang = ((rel <= hi) & (rel + dth >= lo)) | (rel - two_pi + dth >= lo)
-        ang |= dth >= two_pi
-        hit &= ang
-    keep = np.zeros(path.n, dtype=bool)
-    keep[:-1] |= hit
-    keep[1:] |= hit
-    if keep.sum() > 0.8 * path.n:
+    # allowances for rounding: 1 nm radially, 1 nrad in angle
+    count = _crop_mask(path.theta, path.r, rmin, rmax, reach + 1e-9, window is not None,
+                       centre, lo - 1e-9, hi + 1e-9, keep)
+    if count > 0.8 * path.n:
         return path
     return path.select(keep)
 
@@ -206,14 +204,17 @@ def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
 
 
 def _validate_path(path: SampledPath) -> None:
+    from ..kernels._prep import _check_path
+
     if not isinstance(path, SampledPath):
         raise ConfigError(f"path must be a SampledPath, got {type(path).__name__}")
-    for name in ("theta", "r", "z"):
-        if not np.all(np.isfinite(getattr(path, name))):
-            raise ConfigError(f"path.{name} must have finite values")
-    if path.n > 1 and not np.all(np.diff(path.theta) > 0):
-        raise ConfigError("path.theta must be strictly increasing (unwrapped angle, rad)")
-    if path.n and path.r.min() < 0:
+    code = _check_path(path.theta, path.r, path.z)
+    if code == 1:
+        raise ConfigError("path.theta, path.r and path.z must have finite values")
+    if code == 2:
+        raise ConfigError(
+            "path.theta must be strictly increasing (unwrapped angle, rad)")
+    if code == 3:
         raise ConfigError(f"path.r must be >= 0 m, got min {path.r.min()!r}")
 
 
@@ -249,7 +250,8 @@ def _threads(n_threads: int | None):
     n = int(n_threads)
     if not 1 <= n <= numba.config.NUMBA_NUM_THREADS:
         raise ConfigError(
-            f"n_threads must be in [1, {numba.config.NUMBA_NUM_THREADS}], got {n_threads!r}"
+            f"n_threads must be in [1, {numba.config.NUMBA_NUM_THREADS}], "
+            f"got {n_threads!r}"
         )
     old = numba.get_num_threads()
     numba.set_num_threads(n)
@@ -393,12 +395,12 @@ def run_kernel(prep: PreparedPath, tool: Tool, field: Field, out: np.ndarray, *,
     mirror_rmax = hw - prep.rmin
     with _threads(n_threads):
         if method == "pruned":
-            _sweep_pruned(prep.theta, prep.r, prep.z, prep.gap, prep.bidx, prep.bstat,
+            _sweep_pruned(prep.theta, prep.pts, prep.bidx, prep.bstat,
                           prep.theta_ref, R, hw, wav, s0, 1.0 / ds, wav_bound, slack,
                           mirror_rmax, prep.direction, field.x0, field.pitch_x,
                           col0, field.y0, field.pitch_y, row0, out)
         else:
-            _sweep_exhaustive(prep.theta, prep.r, prep.z, prep.gap, prep.bidx,
+            _sweep_exhaustive(prep.theta, prep.pts, prep.bidx,
                               prep.bstat, prep.theta_ref, R, hw, wav, s0, 1.0 / ds,
                               wav_bound, slack, mirror_rmax, field.x0, field.pitch_x,
                               col0, field.y0, field.pitch_y, row0, out)

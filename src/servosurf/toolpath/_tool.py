@@ -69,10 +69,10 @@ class Tool:
     arc_half_angle: float = param(math.radians(60.0), unit="rad",
                                   doc="half-angle phi_max of the edge arc",
                                   low=0.0, high=math.pi / 2, low_open=True)
-    waviness_angle: tuple[float, ...] = param(default_factory=tuple, unit="rad",
-                                              doc="contact angles of the waviness profile")
-    waviness_deviation: tuple[float, ...] = param(default_factory=tuple, unit="m",
-                                                  doc="edge radius deviation (outward +)")
+    waviness_angle: tuple[float, ...] = param(
+        default_factory=tuple, unit="rad", doc="contact angles of the waviness profile")
+    waviness_deviation: tuple[float, ...] = param(
+        default_factory=tuple, unit="m", doc="edge radius deviation (outward +)")
 
     def __post_init__(self) -> None:
         a = tuple(float(v) for v in self.waviness_angle)
@@ -176,8 +176,9 @@ def read_waviness_csv(path: str | Path) -> tuple[tuple[float, ...], tuple[float,
         text = p.read_text()
     except FileNotFoundError:
         raise ConfigError(f"{p}: edge-waviness file not found") from None
-    rows = [r for r in csv.reader(line for line in text.splitlines()
-                                  if line.strip() and not line.lstrip().startswith("#"))]
+    lines = [ln for ln in text.splitlines()
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    rows = list(csv.reader(lines))
     if not rows:
         raise ConfigError(f"{p}: edge-waviness file is empty")
     scale = 1.0
@@ -200,8 +201,8 @@ def read_waviness_csv(path: str | Path) -> tuple[tuple[float, ...], tuple[float,
     try:
         vals = np.array([[float(c) for c in r[:2]] for r in rows], dtype=float)
     except (ValueError, IndexError):
-        raise ConfigError(f"{p}: expected two numeric columns (angle, deviation in m)") \
-            from None
+        raise ConfigError(
+            f"{p}: expected two numeric columns (angle, deviation in m)") from None
     if vals.ndim != 2 or vals.shape[1] != 2:
         raise ConfigError(f"{p}: expected two numeric columns (angle, deviation in m)")
     return tuple(vals[:, 0] * scale), tuple(vals[:, 1])
