@@ -50,8 +50,10 @@ _PROBE_TIMEOUT: float = 120.0
 _BACKENDS = ("auto", "pyvista", "matplotlib")
 
 _PROBE_CODE = """
+import contextlib
 import pyvista as pv
-with pv.vtk_verbosity("off"):
+quiet = getattr(pv, "vtk_verbosity", None)  # pyvista >= 0.45
+with quiet("off") if quiet else contextlib.nullcontext():
     pl = pv.Plotter(off_screen=True, window_size=(64, 64))
     pl.add_mesh(pv.Sphere(), color="white")
     img = pl.screenshot(return_img=True)
@@ -101,11 +103,12 @@ def _atomic_png(path: Path) -> Iterator[Path]:
         Path(tmp).unlink(missing_ok=True)
 
 
-def _stride(n_points: int, max_points: int) -> int:
-    """Smallest row/column stride that brings ``n_points`` to at most ``max_points``."""
-    k = max(1, math.ceil(math.sqrt(n_points / max_points)))
-    while math.ceil(math.sqrt(n_points) / k) ** 2 > max_points * 1.05:
-        k += 1  # pragma: no cover - guards rounding of very elongated maps
+def _stride(shape: tuple[int, int], max_points: int) -> int:
+    """Smallest row/column stride leaving at most ``max_points`` grid points."""
+    ny, nx = shape
+    k = max(1, math.ceil(math.sqrt(ny * nx / max_points)))
+    while math.ceil(ny / k) * math.ceil(nx / k) > max_points:
+        k += 1
     return k
 
 
@@ -132,14 +135,16 @@ def _scene(
         exag = _nice_floor(AUTO_RELIEF * extent / ptp_um) if ptp_um > 0 else 1.0
     else:
         exag = z_exaggeration
-    points = np.column_stack([xyz[:, 0] * lateral, xyz[:, 1] * lateral,
-                              h * 1e6 * exag])
+    points = np.column_stack([xyz[:, 0] * lateral, xyz[:, 1] * lateral, h * 1e6 * exag])
     ztitle = f"z (um, drawn x{exag:g})" if exag != 1 else "z (um)"
     # axis label ranges in true units (the drawn z is exaggerated)
     ranges = [
-        float(points[:, 0].min()), float(points[:, 0].max()),
-        float(points[:, 1].min()), float(points[:, 1].max()),
-        float(h.min()) * 1e6, float(h.max()) * 1e6,
+        float(points[:, 0].min()),
+        float(points[:, 0].max()),
+        float(points[:, 1].min()),
+        float(points[:, 1].max()),
+        float(h.min()) * 1e6,
+        float(h.max()) * 1e6,
     ]
     return {
         "points": points,
@@ -155,7 +160,10 @@ def _scene(
 
 
 def _render_pyvista(
-    scene: dict[str, Any], tmp: Path, title: str | None, cmap: str,
+    scene: dict[str, Any],
+    tmp: Path,
+    title: str | None,
+    cmap: str,
     window_size: tuple[int, int],
 ) -> None:
     import pyvista as pv
@@ -166,7 +174,8 @@ def _render_pyvista(
     mesh = pv.PolyData(scene["points"], faces)
     mesh.point_data["height_nm"] = scene["height_nm"]
     # "error": keep VTK's stderr quiet about the display it tries before EGL
-    with pv.vtk_verbosity("error"):
+    quiet = getattr(pv, "vtk_verbosity", None)  # pyvista >= 0.45
+    with quiet("error") if quiet else contextlib.nullcontext():
         pl = pv.Plotter(off_screen=True, window_size=list(window_size))
         try:
             pl.set_background("white")
@@ -211,7 +220,10 @@ def _render_pyvista(
 
 
 def _render_matplotlib(
-    scene: dict[str, Any], tmp: Path, title: str, cmap: str,
+    scene: dict[str, Any],
+    tmp: Path,
+    title: str,
+    cmap: str,
     window_size: tuple[int, int],
 ) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -225,11 +237,18 @@ def _render_matplotlib(
     ax = fig.add_subplot(projection="3d")
     p = scene["points"]
     z_true = p[:, 2] / scene["exaggeration"]  # tick labels in true um
-    ax.plot_trisurf(p[:, 0], p[:, 1], z_true, triangles=scene["faces"], cmap=cmap,
-                    linewidth=0.0, antialiased=False)
+    ax.plot_trisurf(
+        p[:, 0],
+        p[:, 1],
+        z_true,
+        triangles=scene["faces"],
+        cmap=cmap,
+        linewidth=0.0,
+        antialiased=False,
+    )
     h = scene["height_nm"]
     sm = ScalarMappable(norm=Normalize(float(h.min()), float(h.max())), cmap=cmap)
-    fig.colorbar(sm, ax=ax, shrink=0.6, label=scene["bar_title"])
+    fig.colorbar(sm, ax=ax, shrink=0.6, pad=0.12, label=scene["bar_title"])
     ax.set_xlabel(scene["xtitle"])
     ax.set_ylabel(scene["ytitle"])
     ax.set_zlabel(scene["ztitle"])
@@ -325,15 +344,18 @@ def render_surface(
     if not isinstance(cmap, str) or cmap not in matplotlib.colormaps:
         raise ConfigError(f"cmap must be a matplotlib colormap name, got {cmap!r}")
     path = Path(path)
-    n = surface.z.size
 
     reason = None
     if backend != "matplotlib":
         try:
             import pyvista  # noqa: F401
         except ImportError:
-            raise ImportError("3D rendering needs pyvista: pip install pyvista") from None
-        scene = _scene(surface, _stride(n, MAX_RENDER_POINTS), z_exaggeration)
+            raise ImportError(
+                "3D rendering needs pyvista: pip install pyvista"
+            ) from None
+        scene = _scene(
+            surface, _stride(surface.shape, MAX_RENDER_POINTS), z_exaggeration
+        )
         if backend == "auto":
             reason = _offscreen_problem()
         if reason is None:
@@ -351,7 +373,7 @@ def render_surface(
             stacklevel=2,
         )
 
-    scene = _scene(surface, _stride(n, MAX_FALLBACK_POINTS), z_exaggeration)
+    scene = _scene(surface, _stride(surface.shape, MAX_FALLBACK_POINTS), z_exaggeration)
     text = title or ""
     if reason is not None:
         text = f"{text}\n(matplotlib fallback: {reason})".lstrip("\n")

@@ -1,0 +1,240 @@
+"""Pointwise surface model: heights left by the tool at arbitrary points.
+
+A map or profile recording is a set of points ``(x, y)`` on the workpiece face (m,
+spindle axis at the origin). The surface at a point is the lower envelope of the
+round-nose arc over the passes that reach it (the model of
+:func:`servosurf.toolpath.sweep`, evaluated at the points):
+
+``z = min(top, min_k [z_tool(t_k) + R' - sqrt(R'^2 - dr_k^2) - W(phi_k) / cos(phi_k)])``
+
+with ``t_k`` the time the tool passes the point's angle, ``dr_k`` its radial offset
+from the tool, ``R' = R + radius_error`` and ``W`` the edge waviness. The tool
+height ``z_tool(t) = x1(t) + d_path(t, theta)`` is the deterministic loop
+response (periodic after the start-up, extended periodically) plus the
+outside-the-loop terms (sensor nonlinearity, thermal drift, spindle axial error).
+Elastic recovery raises the result by ``recovery * (top - z)``.
+
+For lenslet paths each ring passes a point once; for facing the nearest five passes
+are evaluated. Written for the diagnosis (no dependency on the surface simulator);
+the tests compare it with :func:`servosurf.toolpath.sweep` on a lenslet field.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._sim import CaseModel, ModelParams
+
+__all__ = ["PointSet", "ToolTrajectory", "tool_trajectory", "surface_heights",
+           "legendre_waviness", "path_terms"]
+
+
+class PointSet:
+    """Points of a map or profile in the workpiece frame with their passes.
+
+    Parameters
+    ----------
+    case : CaseModel
+        The case (its toolpath must be set).
+    x, y : ndarray of shape (n,)
+        Point coordinates in m.
+    """
+
+    def __init__(self, case: CaseModel, x: np.ndarray, y: np.ndarray) -> None:
+        spec = case.toolpath
+        path = spec.path
+        self.x = np.asarray(x, dtype=float)
+        self.y = np.asarray(y, dtype=float)
+        self.r = np.hypot(self.x, self.y)
+        self.theta = np.arctan2(self.y, self.x)
+        w = path.angular_speed
+        t_rev = 2 * math.pi / w
+        phase = np.mod(self.theta - path.theta0, 2 * math.pi) / w
+        if spec.kind == "lenslet":
+            ks = np.arange(path.ring_count)
+            t = phase[:, None] + ks[None, :] * t_rev
+        else:
+            t_r = (path.r_start - self.r) / (path.feed_per_rev * path.rev_per_s)
+            jc = np.rint((t_r - phase) / t_rev)
+            ks = np.arange(-2, 3)
+            j = jc[:, None] + ks[None, :]
+            n_rev = math.floor(path.duration / t_rev)
+            j = np.clip(j, 0, n_rev)
+            t = phase[:, None] + j * t_rev
+        self.t = t                                   # (n, passes) s
+        self.dr = self.r[:, None] - path.radius_at(t)  # (n, passes) m
+        self.theta_pass = path.theta_at(t)          # unwrapped tool angle, rad
+        self.z_cmd = path.z_at(t)
+        self.half_width = spec.tool.half_width
+        self.radius = spec.tool.nose_radius
+        self.kind = spec.kind
+
+    @property
+    def n(self) -> int:
+        """Number of points."""
+        return int(self.x.size)
+
+
+class ToolTrajectory:
+    """Deterministic tool height from the loop simulation, extended periodically.
+
+    Parameters
+    ----------
+    t : ndarray of shape (m,)
+        Sample times in s (0, 1/fs, ...).
+    x1 : ndarray of shape (m,)
+        Tool height in m.
+    period : float
+        Period of the steady state in s (lenslet: 1/f; facing: one sample).
+    """
+
+    def __init__(self, t: np.ndarray, x1: np.ndarray, period: float) -> None:
+        self.t = t
+        self.x1 = x1
+        self.period = period
+        self.t_end = float(t[-1])
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        """Tool height in m at times ``t`` (s)."""
+        t = np.asarray(t, dtype=float)
+        start = self.t_end - self.period
+        tt = np.where(t > self.t_end, start + np.mod(t - start, self.period), t)
+        return np.interp(tt, self.t, self.x1)
+
+
+def tool_trajectory(case: CaseModel, p: ModelParams, *, periods: int = 12,
+                    sim: dict | None = None) -> ToolTrajectory:
+    """Simulate the cut of the case's toolpath under ``p`` (deterministic part).
+
+    Parameters
+    ----------
+    case : CaseModel
+        Case with a toolpath.
+    p : ModelParams
+        Effects.
+    periods : int, default: 12
+        Lenslet periods simulated before the steady state is extended (the loop
+        settles to 1e-14 m in six periods).
+    sim : dict, optional
+        A simulation result (``tool`` and its times from 0) to reuse.
+
+    Returns
+    -------
+    ToolTrajectory
+        The tool height over time.
+    """
+    spec = case.toolpath
+    fs = case.fs
+    if spec.kind == "lenslet":
+        period = 1.0 / spec.path.frequency
+    else:
+        period = 0.01
+    n = int(round(min(periods * period if spec.kind == "lenslet" else 0.12,
+                      spec.path.duration) * fs)) + 2
+    if sim is not None and sim["tool"].size >= n:
+        x1 = sim["tool"]
+    else:
+        t = np.arange(n) / fs
+        ref = spec.path.z_at(t)
+        x1 = case.simulate(p, reference=ref, chip=True)["tool"]
+    t = np.arange(x1.size) / fs
+    if spec.kind != "lenslet":
+        period = 2.0 / fs
+    return ToolTrajectory(t, x1, period)
+
+
+def legendre_waviness(phi: np.ndarray, coefs, phi_ref: float) -> np.ndarray:
+    """Edge deviation ``sum c_k P_{k+3}(phi / phi_ref)`` in m (orders 3, 4, ...)."""
+    if not len(coefs):
+        return np.zeros_like(phi)
+    u = np.clip(phi / phi_ref, -1.5, 1.5)
+    c = np.zeros(3 + len(coefs))
+    c[3:] = coefs
+    return np.polynomial.legendre.legval(u, c)
+
+
+def path_terms(case: CaseModel, p: ModelParams, t: np.ndarray, theta: np.ndarray,
+               z_tool: np.ndarray) -> np.ndarray:
+    """Outside-the-loop tool-height terms in m.
+
+    Sensor nonlinearity ``-a2 z^2 - a3 z^3`` (the loop makes the *reading* follow
+    the command, so the tool misses by the inverse nonlinearity), thermal drift
+    ``a (1 - exp(-t / tau)) + b t`` and the synchronous spindle axial error
+    ``sum a_h cos(h theta + phi_h)``.
+    """
+    dz = np.zeros(np.shape(t))
+    if p.sensor_a2 or p.sensor_a3:
+        dz -= p.sensor_a2 * z_tool**2 + p.sensor_a3 * z_tool**3
+    if p.drift_amplitude:
+        dz += p.drift_amplitude * -np.expm1(-t / max(p.drift_time_constant, 1e-9))
+    if p.drift_rate:
+        dz += p.drift_rate * t
+    for h, a, ph in zip(p.spindle_orders, p.spindle_amplitudes, p.spindle_phases,
+                        strict=True):
+        dz += a * np.cos(h * theta + ph)
+    return dz
+
+
+def phi_reference(case: CaseModel) -> float:
+    """Contact angle (rad) spanned by the cut: the waviness basis runs over it."""
+    spec = case.toolpath
+    r = spec.tool.nose_radius
+    depth = spec.path.depth_of_cut if spec.kind == "lenslet" else \
+        spec.path.feed_per_rev * 4
+    half = min(math.sqrt(max(2 * r * depth - depth * depth, 0.0)), spec.tool.half_width)
+    return max(math.asin(min(half / r, 1.0)), 1e-6)
+
+
+def surface_heights(case: CaseModel, pts: PointSet, p: ModelParams,
+                    traj: ToolTrajectory, *, noise=None, top: float = 0.0,
+                    return_pass: bool = False):
+    """Heights in m of the surface at the points under ``p``.
+
+    Parameters
+    ----------
+    case : CaseModel
+        The case.
+    pts : PointSet
+        Points and passes.
+    p : ModelParams
+        Effects (tool, path and map terms are used here; loop terms through
+        ``traj``).
+    traj : ToolTrajectory
+        Deterministic tool height.
+    noise : callable, optional
+        ``noise(t) -> m`` stochastic tool error added to the tool height.
+    top : float, default: 0.0
+        Pre-cut height in m.
+    return_pass : bool, default: False
+        Also return the index of the active pass per point (-1 when uncut).
+
+    Returns
+    -------
+    ndarray of shape (n,)
+        Heights in m (``top`` where no pass reaches).
+    """
+    R = pts.radius + p.radius_error
+    z_tool = traj(pts.t)
+    zt = z_tool + path_terms(case, p, pts.t, pts.theta_pass, z_tool)
+    if noise is not None:
+        zt = zt + noise(pts.t)
+    dr = pts.dr
+    reach = np.abs(dr) <= pts.half_width
+    with np.errstate(invalid="ignore"):
+        arc = R - np.sqrt(np.maximum(R * R - dr * dr, 0.0))
+        if len(p.waviness):
+            phi = np.arcsin(np.clip(dr / pts.radius, -1.0, 1.0))
+            arc = arc - legendre_waviness(phi, p.waviness, phi_reference(case)) \
+                / np.cos(phi)
+    h = np.where(reach, zt + arc, np.inf)
+    k = np.argmin(h, axis=1)
+    hmin = h[np.arange(h.shape[0]), k]
+    cut = hmin < top
+    z = np.where(cut, hmin, top)
+    if p.recovery:
+        z = z + p.recovery * (top - z)
+    if return_pass:
+        return z, np.where(cut, k, -1)
+    return z

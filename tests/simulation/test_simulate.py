@@ -1,0 +1,106 @@
+"""The whole pipeline: parts switch, seeds, closed forms, CLI."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from servosurf.cli import main
+from servosurf.errors import ConfigError
+from servosurf.servo import ServoLoop, load_machine
+from servosurf.simulation import simulate
+from servosurf.toolpath import load_toolpath
+
+LENS = "toolpaths/lenslet_5um.toml"
+
+
+@pytest.fixture(scope="module")
+def small_lens():
+    """The 5 um lenslet toolpath on a coarser 2 um grid (fast)."""
+    spec = load_toolpath(LENS)
+    fld = dataclasses.replace(spec.field, pitch_x=2e-6, pitch_y=2e-6, nx=120, ny=120)
+    return dataclasses.replace(spec, field=fld)
+
+
+def test_no_deviation_reproduces_kernel_alone(small_lens):
+    from servosurf.toolpath import sample, sweep
+
+    res = simulate(small_lens, parts=())
+    path = sample(small_lens, field=small_lens.field, tool=small_lens.tool)
+    ref = sweep(path, small_lens.tool, small_lens.field, initial=0.0)
+    np.testing.assert_allclose(res.surface.z, ref.z, atol=1e-15)  # 1 fm
+    assert not any(np.any(v) for v in res.deviation.values())
+
+
+def test_tracking_matches_closed_loop_gain(small_lens):
+    res = simulate(small_lens, parts=("tracking",), bandwidth=1448, mass=0.175)
+    p = small_lens.path
+    loop = ServoLoop(res.machine)
+    h = loop.frf(np.array([p.frequency])).paths[("reference", "tool")][0]
+    # amplitude of the actual tool motion over the last periods, against |T| A
+    tail = res.z_command.size // 2
+    x = res.z_command[tail:] + res.deviation["tracking"][tail:]
+    amp = (x.max() - x.min()) / 2
+    np.testing.assert_allclose(amp, abs(h) * p.amplitude, rtol=2e-3)
+
+
+def test_force_deviation_scales_with_thrust_pressure(small_lens):
+    from servosurf.cutting import Material, Workpiece
+
+    def run(kt):
+        wp = Workpiece(material=Material(specific_thrust_pressure=kt))
+        return simulate(small_lens, parts=("tracking", "force"), workpiece=wp,
+                        bandwidth=1448, mass=0.175).deviation["force"]
+
+    a, b = run(0.5e9), run(1.0e9)
+    # the chip depends on the deviated position, so the response is only nearly
+    # linear in k_t (a few per cent at these deviations)
+    np.testing.assert_allclose(b.max() / a.max(), 2.0, rtol=0.05)
+    assert a.max() > 0
+
+
+def test_seed_stability_and_dependence(small_lens):
+    a = simulate(small_lens, parts=("vibration",), seed=3)
+    b = simulate(small_lens, parts=("vibration",), seed=3)
+    c = simulate(small_lens, parts=("vibration",), seed=4)
+    np.testing.assert_array_equal(a.surface.z, b.surface.z)
+    assert not np.array_equal(a.surface.z, c.surface.z)
+
+
+def test_bad_inputs(small_lens):
+    with pytest.raises(ConfigError, match="unknown deviation part"):
+        simulate(small_lens, parts=("wobble",))
+    with pytest.raises(ConfigError, match="unstable"):
+        simulate(small_lens, bandwidth=1700, mass=0.175)
+
+
+def test_simulate_cli_json_keys(tmp_path, capsys):
+    rc = main(["simulate", LENS, "--out", str(tmp_path / "s"), "--json", "--no-render",
+               "--format", "npz"])
+    assert rc == 0
+    data = json.loads(capsys.readouterr().out)
+    for key in ("form_error_max_m", "form_error_lag_m", "spectrum_peaks_per_m", "ra_m",
+                "sa_m", "sq_m"):
+        assert key in data
+    assert 150e-9 < data["form_error_max_m"] < 350e-9
+    assert data["form_error_lag_m"] > 0
+    assert any(abs(p - 173e3) < 10e3 for p in data["spectrum_peaks_per_m"][:3])
+    for name in ("map.png", "profile.png", "spectrum.png", "highpass.png", "summary.json",
+                 "surface.npz"):
+        assert (tmp_path / "s" / name).stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["simulate", "nope.toml"], "not found"),
+    (["simulate", LENS, "--bandwidth", "-5"], "--bandwidth"),
+    (["simulate", LENS, "--mass", "0"], "--mass"),
+    (["simulate", LENS, "--bandwidth", "5000"], "bandwidth"),
+])
+def test_simulate_cli_errors(argv, match, capsys, tmp_path):
+    assert main(argv + ["--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and match in err[0]
+    assert not list((tmp_path / "o").glob("surface.*"))
