@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy as sp
@@ -115,7 +115,6 @@ class ModelParams:
     flexure_stiffness: float | None = None
     flexure_damping: float | None = None
     force_constant: float | None = None
-    extras: dict = field(default_factory=dict, compare=False, hash=False)
 
     def replace(self, **kw) -> ModelParams:
         """Return a copy with some knobs changed."""
@@ -128,6 +127,38 @@ class ModelParams:
             if self.mode_gain != 0.0 and self.mode_frequency > 0 else ()
         return (self.extra_delay, mode, self.moving_mass, self.flexure_stiffness,
                 self.flexure_damping, self.force_constant)
+
+    def key(self, tags: tuple[str, ...]) -> tuple:
+        """Values of the knob groups ``tags`` (for caching what depends on them).
+
+        Groups: ``linear`` (delay, mode, recalibration), ``lines``,
+        ``sensor_noise``, ``nonlin`` (saturation, Kf(x), flexure), ``force``
+        (specific cutting force), ``path`` (sensor nonlinearity, drift, spindle),
+        ``tool`` (waviness, radius error, elastic recovery).
+        """
+        out = []
+        for t in tags:
+            if t == "linear":
+                out.append(self.linear_key())
+            elif t == "lines":
+                out.append((self.line_frequencies, self.line_amplitudes))
+            elif t == "sensor_noise":
+                out.append((self.sensor_floor, self.sensor_corner))
+            elif t == "nonlin":
+                out.append((self.max_current, self.kf_b1, self.kf_b2, self.flexure_k2,
+                            self.flexure_k3))
+            elif t == "force":
+                out.append(self.specific_force)
+            elif t == "path":
+                out.append((self.sensor_a2, self.sensor_a3, self.drift_amplitude,
+                            self.drift_time_constant, self.drift_rate,
+                            self.spindle_orders, self.spindle_amplitudes,
+                            self.spindle_phases))
+            elif t == "tool":
+                out.append((self.waviness, self.radius_error, self.recovery))
+            else:
+                raise ValueError(f"unknown knob group {t!r}")
+        return tuple(out)
 
     @property
     def has_mode(self) -> bool:

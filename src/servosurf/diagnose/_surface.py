@@ -208,7 +208,9 @@ def surface_heights(case: CaseModel, pts: PointSet, p: ModelParams,
     top : float, default: 0.0
         Pre-cut height in m.
     return_pass : bool, default: False
-        Also return the index of the active pass per point (-1 when uncut).
+        Also return the index of the active pass per point (-1 when uncut) and
+        the lowest tool height before clipping at ``top`` (m, inf when no pass
+        reaches).
 
     Returns
     -------
@@ -236,5 +238,5 @@ def surface_heights(case: CaseModel, pts: PointSet, p: ModelParams,
     if p.recovery:
         z = z + p.recovery * (top - z)
     if return_pass:
-        return z, np.where(cut, k, -1)
+        return z, np.where(cut, k, -1), hmin
     return z

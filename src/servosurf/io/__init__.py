@@ -1,0 +1,45 @@
+"""Interferometer and exchange file formats: read and write :class:`Surface` maps.
+
+Readers (detected by magic bytes, then suffix):
+
+============== ========= ===============================================
+format         suffix    content
+============== ========= ===============================================
+metropro_dat   .dat      ZYGO MetroPro binary, header formats 1, 2, 3
+zygo_ascii     .asc      ZYGO MetroPro ASCII ("Zygo ASCII Data File")
+zygo_xyz       .xyz      ZYGO XYZ (pixel x, y, height in um / No Data)
+datx           .datx     ZYGO Mx HDF5
+x3p            .x3p      ISO 5436-2 / ISO 25178-72
+npz            .npz      servosurf NumPy archive
+mx_profile_csv .csv      ZYGO Mx profile export (a :class:`Profile`)
+============== ========= ===============================================
+
+Writers: ``datx``, ``metropro_dat``, ``x3p``, ``zygo_xyz``, ``npz``.
+
+All heights and pixel sizes are in metres; invalid pixels are NaN; row 0 is the top
+of the map as the instrument shows it.
+"""
+
+from __future__ import annotations
+
+# Importing the format modules registers their readers and writers.
+from . import _datx, _metropro_dat, _mx_profile_csv, _npz, _x3p, _zygo_ascii, _zygo_xyz  # noqa: F401
+from ._registry import (
+    FormatInfo,
+    encode_surface,
+    formats,
+    read_any,
+    read_profile,
+    read_surface,
+    write_surface,
+)
+
+__all__ = [
+    "FormatInfo",
+    "encode_surface",
+    "formats",
+    "read_any",
+    "read_profile",
+    "read_surface",
+    "write_surface",
+]

@@ -15,7 +15,7 @@ from ._config import CACHE, FASTMATH
 __all__ = ["_sample_facing", "_sample_lenslet", "_index_noise"]
 
 
-@njit(cache=CACHE, fastmath=FASTMATH)
+@njit(nogil=True, cache=CACHE, fastmath=FASTMATH)
 def _sample_facing(starts, stops, fs, theta0, omega, r_start, r_rate, z0, t, theta, r,
                    z):  # pragma: no cover - numba
     """Spiral facing path at the sample numbers ``starts[m] <= k < stops[m]``.
@@ -57,7 +57,7 @@ def _sample_facing(starts, stops, fs, theta0, omega, r_start, r_rate, z0, t, the
             k += 1
 
 
-@njit(cache=CACHE, fastmath=FASTMATH)
+@njit(nogil=True, cache=CACHE, fastmath=FASTMATH)
 def _sample_lenslet(starts, stops, fs, theta0, omega, frequency, amplitude, depth,
                     ring_radius, ring_pitch, ring_count, n_per_ring, t, theta, r,
                     z):  # pragma: no cover - numba

@@ -475,7 +475,7 @@ def _envelope_pruned(phi, rq, h0, j0, theta, pts, bidx, bstat, theta_ref, radius
     return best
 
 
-@njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
+@njit(parallel=True, nogil=True, cache=CACHE, fastmath=FASTMATH)
 def _sweep_exhaustive(theta, pts, bidx, bstat, theta_ref, radius, half_width,
                       wav, wav_s0, wav_inv_ds, wav_bound, slack, mirror_rmax, x0, dx,
                       col0, y0, dy, row0, out):  # pragma: no cover - numba
@@ -544,7 +544,7 @@ def _sweep_exhaustive(theta, pts, bidx, bstat, theta_ref, radius, half_width,
             out[row, col] = best
 
 
-@njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
+@njit(parallel=True, nogil=True, cache=CACHE, fastmath=FASTMATH)
 def _sweep_pruned(theta, pts, bidx, bstat, theta_ref, radius, half_width, wav,
                   wav_s0, wav_inv_ds, wav_bound, slack, mirror_rmax, direction, x0, dx,
                   col0, y0, dy, row0, out):  # pragma: no cover - numba
