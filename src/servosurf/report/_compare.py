@@ -120,7 +120,12 @@ def compare_surfaces(measured: Surface, simulated: Surface, *,
     rr = rr[np.isfinite(rr)]
     fit = float(100.0 * (1.0 - np.linalg.norm(rr) / np.linalg.norm(mv - mv.mean()))) \
         if mv.std() > 0 else float("nan")
-    corr = float(np.corrcoef(mv, sv)[0, 1]) if mv.std() > 0 and sv.std() > 0 else float("nan")
+    # correlation of the form-corrected measurement (simulated + residual) with the
+    # simulation, on the pixels where both are valid
+    rz = res.z[both]
+    ok = np.isfinite(rz)
+    corr = float(np.corrcoef(sv[ok] + rz[ok], sv[ok])[0, 1]) \
+        if sv[ok].std() > 0 else float("nan")
     fm, pm = psd_1d(np.where(both, m.z, np.nan), m.dy if axis == 0 else m.dx, axis=axis)
     fs_, ps = psd_1d(np.where(both, s.z, np.nan), s.dy if axis == 0 else s.dx, axis=axis)
     pk_m = [p["freq_per_m"] for p in find_peaks_spectrum(fm, pm, n=5)]
