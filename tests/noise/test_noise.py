@@ -143,3 +143,33 @@ def test_design_study_larger_mass_lowers_optimum():
     # the heavier mass reduces the real error at low bandwidth (paper section 3.3)
     assert study.rms_real[1, 1] < study.rms_real[0, 1]
     assert 1400 < study.stability_limit[1] < 1800
+
+
+def test_vibration_stream_segments_consistent_and_spectrum(loop):
+    from servosurf.noise import VibrationStream
+
+    vs = VibrationStream(loop, seed=9)
+    whole = vs.segment(0, 300_000)
+    # any sub-range equals the slice of a longer range (tiling-independent), also
+    # across the white-noise block boundary at 65536
+    np.testing.assert_allclose(vs.segment(65_000, 2_000), whole[65_000:67_000],
+                               rtol=0, atol=1e-22)  # exact up to FFT rounding
+    np.testing.assert_allclose(vs.segment(123_456, 7), whole[123_456:123_463], atol=1e-22)
+    b = synthesize(loop)
+    # the FIR's energy is the synthesised RMS (window smoothing keeps the power)
+    np.testing.assert_allclose(vs.rms, b.rms_real(), rtol=0.03)
+    np.testing.assert_allclose(whole.std(), b.rms_real(), rtol=0.05)
+    f, p = welch_psd(whole, loop.fs)
+    sel = (f > 200) & (f < 40e3)
+    ratio = p[sel] / synthesize(loop, freq=f[sel]).real_total
+    assert abs(np.median(ratio) - 1) < 0.1
+    assert not np.allclose(VibrationStream(loop, seed=10).segment(0, 1000), whole[:1000],
+                           rtol=1e-3, atol=0)
+
+
+def test_vibration_stream_memmap(tmp_path, loop):
+    from servosurf.noise import VibrationStream
+
+    vs = VibrationStream(loop, seed=1, taps=4096)
+    mm = vs.to_memmap(tmp_path / "v.npy", 50_000, chunk=12_345)
+    np.testing.assert_allclose(mm[:], vs.segment(0, 50_000).astype(np.float32))

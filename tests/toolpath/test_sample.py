@@ -89,3 +89,17 @@ def test_clearance_warning():
     p2 = tp.sample(ok, t_window=(0.0, 0.05), fs=20e3)
     angle = tp.check_clearance(p2, ok.tool)  # no warning: 11.9 < 15 degree
     assert np.degrees(angle) == pytest.approx(11.9, abs=0.2)
+
+
+@pytest.mark.parametrize("kind", ["facing", "lenslet"])
+def test_numba_sampling_matches_the_path_formulas(kind):
+    if kind == "facing":
+        spec = small_facing()
+    else:
+        spec = tp.ToolpathSpec(kind="lenslet", path=tp.LensletToolpath(ring_count=2))
+    p = tp.sample(spec, fs=20e3)
+    theta, r, z = spec.path.evaluate(p.t)
+    np.testing.assert_array_equal(p.index, np.arange(p.n))
+    np.testing.assert_allclose(p.theta, theta, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(p.r, r, rtol=0, atol=1e-17)  # 10 am
+    np.testing.assert_allclose(p.z, z, rtol=0, atol=1e-17)  # 10 am

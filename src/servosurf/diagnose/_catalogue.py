@@ -102,6 +102,7 @@ class Locations:
     sensor_corner: float = 15e3
     sensor_level: float = 1e-12
     specific_force: float = 2.6e9
+    nominal: dict = field(default_factory=dict)
 
 
 class Effect:
@@ -150,7 +151,7 @@ class Effect:
         """Free parameters of term ``slot`` for the nonlinear fit."""
         raise NotImplementedError  # pragma: no cover
 
-    def report(self, p: ModelParams, slot: int) -> dict[str, float]:
+    def report(self, p: ModelParams, slot: int, loc: Locations) -> dict[str, float]:
         """Parameter values of term ``slot`` in SI units."""
         raise NotImplementedError  # pragma: no cover
 
@@ -226,7 +227,7 @@ class StructuralMode(Effect):
                 _f("mode_damping", 1e-3, 0.5, True),
                 _f("mode_gain", 1e-16, 1e-5, True)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"frequency": p.mode_frequency, "damping_ratio": p.mode_damping,
                 "compliance": p.mode_gain}
 
@@ -267,7 +268,7 @@ class LoopDelay(Effect):
     def free(self, p, slot, loc):
         return [_f("extra_delay", -loc.nominal_delay / loc.fs, 20.0 / loc.fs)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"extra_delay": p.extra_delay}
 
     def remove(self, p, slot):
@@ -325,7 +326,7 @@ class BaseLines(Effect):
                 _tuple_free("line_amplitudes", slot, 1e-16, 1e-3, True,
                             name=f"amplitude_{slot + 1}")]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {f"frequency_{slot + 1}": p.line_frequencies[slot],
                 f"amplitude_{slot + 1}": p.line_amplitudes[slot]}
 
@@ -375,7 +376,7 @@ class ThermalDrift(Effect):
                                                        1e3, True),
                 _f("drift_rate", -1e-5, 1e-5)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"amplitude": p.drift_amplitude, "time_constant": p.drift_time_constant,
                 "rate": p.drift_rate}
 
@@ -419,7 +420,7 @@ class FlexureNonlinearity(Effect):
         a, b = self._probes(loc)
         return [_f("flexure_k2", -1e5 * a, 1e5 * a), _f("flexure_k3", -1e5 * b, 1e5 * b)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"k_quadratic": p.flexure_k2, "k_cubic": p.flexure_k3}
 
     def remove(self, p, slot):
@@ -459,7 +460,7 @@ class ForceConstantPosition(Effect):
         a, b = self._probes(loc)
         return [_f("kf_b1", -300 * a, 300 * a), _f("kf_b2", -300 * b, 300 * b)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"b1": p.kf_b1, "b2": p.kf_b2}
 
     def remove(self, p, slot):
@@ -496,7 +497,7 @@ class AmplifierSaturation(Effect):
     def free(self, p, slot, loc):
         return [_f("max_current", 1e-4, 1e3, True)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"max_current": p.max_current}
 
     def remove(self, p, slot):
@@ -539,7 +540,7 @@ class SensorNonlinearity(Effect):
         a, b = self._probes(loc)
         return [_f("sensor_a2", -1e4 * a, 1e4 * a), _f("sensor_a3", -1e4 * b, 1e4 * b)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"a2": p.sensor_a2, "a3": p.sensor_a3}
 
     def remove(self, p, slot):
@@ -590,11 +591,9 @@ class SensorNoiseShape(Effect):
         return [_f("sensor_floor", 1e-16, 1e-8, True),
                 _f("sensor_corner", 100.0, 0.5 * loc.fs, True)]
 
-    def report(self, p, slot):
-        fl, co = self._cur(p, _LOC_DUMMY) if p.sensor_floor is None else (
-            p.sensor_floor, p.sensor_corner)
-        return {"floor": p.sensor_floor if p.sensor_floor is not None else fl,
-                "corner": p.sensor_corner if p.sensor_corner is not None else co}
+    def report(self, p, slot, loc):
+        fl, co = self._cur(p, loc)
+        return {"floor": fl, "corner": co}
 
     def remove(self, p, slot):
         return p.replace(sensor_floor=None, sensor_corner=None)
@@ -635,7 +634,7 @@ class ToolEdgeWaviness(Effect):
         return [_tuple_free("waviness", k, -1e-6, 1e-6, name=f"p{k + 3}")
                 for k in range(4)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         w = list(p.waviness) + [0.0] * (4 - len(p.waviness))
         return {f"p{k + 3}": float(w[k]) for k in range(4)}
 
@@ -669,7 +668,7 @@ class ToolRadiusError(Effect):
     def free(self, p, slot, loc):
         return [_f("radius_error", -2e-4, 2e-4)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"radius_error": p.radius_error}
 
     def remove(self, p, slot):
@@ -705,7 +704,7 @@ class CuttingForceCoefficient(Effect):
     def free(self, p, slot, loc):
         return [_f("specific_force", 1e6, 1e12, True)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"specific_force": p.specific_force}
 
     def remove(self, p, slot):
@@ -763,7 +762,7 @@ class SpindleAxialError(Effect):
                 _tuple_free("spindle_phases", slot, -4 * math.pi, 4 * math.pi,
                             name=f"phase_{slot + 1}")]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         ph = (p.spindle_phases[slot] + math.pi) % (2 * math.pi) - math.pi
         return {f"order_{slot + 1}": float(p.spindle_orders[slot]),
                 f"amplitude_{slot + 1}": p.spindle_amplitudes[slot],
@@ -804,7 +803,7 @@ class ElasticRecovery(Effect):
     def free(self, p, slot, loc):
         return [_f("recovery", -0.2, 0.2)]
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {"recovery": p.recovery}
 
     def remove(self, p, slot):
@@ -858,14 +857,12 @@ class Recalibration(Effect):
             out.append(_f(a, v / 3, v * 3, True))
         return out
 
-    def report(self, p, slot):
+    def report(self, p, slot, loc):
         return {a: getattr(p, a) for a in self._attrs if getattr(p, a) is not None}
 
     def remove(self, p, slot):
         return p.replace(**{a: None for a in self._attrs})
 
-
-_LOC_DUMMY = Locations(fs=1.0)
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
 CATALOGUE: tuple[Effect, ...] = (

@@ -43,6 +43,7 @@ __all__ = [
     "decode_text",
     "writer_error",
     "unsupported",
+    "pixel_origin",
 ]
 
 #: Earliest plausible acquisition time (1980-01-01 UTC) in seconds since the epoch.
@@ -391,6 +392,26 @@ def as_surface(obj: Surface | Profile) -> Surface:
         md.setdefault("kind", "profile")
         return Surface(obj.z[None, :], obj.dx, obj.dx, metadata=md, x0=obj.x0)
     raise TypeError(f"expected a Surface or Profile, got {type(obj).__name__}")
+
+
+def pixel_origin(surface: Surface) -> tuple[int, int]:
+    """(column, row) of pixel (0, 0) on a camera grid, from ``x0/dx`` and ``y0/dy``.
+
+    Returns (0, 0) unless the surface is calibrated and both offsets are
+    non-negative whole multiples of the pixel size (as readers of formats with a
+    phase window produce them).
+    """
+    if not surface.calibrated:
+        return 0, 0
+    assert surface.dx is not None and surface.dy is not None
+    out = []
+    for off, step in ((surface.x0, surface.dx), (surface.y0, surface.dy)):
+        n = off / step
+        k = round(n)
+        if not (0 <= k < 32768) or abs(n - k) > 1e-6:
+            return 0, 0
+        out.append(int(k))
+    return out[0], out[1]
 
 
 def writer_error(fmt: str, what: str, remedy: str = "") -> FileFormatError:

@@ -31,6 +31,7 @@ from ._common import (
     make_surface,
     metadata_json,
     parse_metadata_json,
+    pixel_origin,
     timestamp_from_iso,
     writer_error,
 )
@@ -315,7 +316,7 @@ def encode_metropro_dat(
     intf_scale_factor: float = 0.5,
     obliquity_factor: float = 1.0,
     camera_size: tuple[int, int] | None = None,
-    phase_origin: tuple[int, int] = (0, 0),
+    phase_origin: tuple[int, int] | None = None,
     intensity: np.ndarray | None = None,
 ) -> bytes:
     """Encode a surface as a MetroPro ``.dat`` file.
@@ -341,8 +342,9 @@ def encode_metropro_dat(
         Obliquity factor.
     camera_size : (int, int), optional
         Camera (width, height) in pixels; default just holds the phase window.
-    phase_origin : (int, int), default: (0, 0)
-        Camera pixel (x, y) of the top-left corner of the phase window.
+    phase_origin : (int, int), optional
+        Camera pixel (x, y) of the top-left corner of the phase window; default
+        ``(x0 / dx, y0 / dy)`` when those are whole pixels, else (0, 0).
     intensity : ndarray of shape (h, w) or (buckets, h, w), optional
         Intensity frames (uint16 counts) stored before the phase data.
 
@@ -398,7 +400,7 @@ def encode_metropro_dat(
         )
     raw[valid] = -counts if sign else counts
 
-    ox, oy = (int(v) for v in phase_origin)
+    ox, oy = pixel_origin(surface) if phase_origin is None else (int(v) for v in phase_origin)
     cam_w, cam_h = camera_size if camera_size is not None else (ox + nx, oy + ny)
     if intensity is not None:
         inten = np.asarray(intensity)
@@ -417,7 +419,12 @@ def encode_metropro_dat(
     ts = timestamp_from_iso(md.get("date")) or 0
 
     def put(fmt: str, off: int, value: Any) -> None:
-        struct.pack_into(fmt, hdr, off, value)
+        try:
+            struct.pack_into(fmt, hdr, off, value)
+        except struct.error:
+            field = next((f for f, o, _ in _FIELDS if o == off), f"byte {off}")
+            raise writer_error("metropro_dat", f"header field {field} cannot hold {value!r}",
+                               "check the phase window, camera size and origin") from None
 
     put(">I", 0, MAGIC[header_format])
     put(">H", 4, header_format)

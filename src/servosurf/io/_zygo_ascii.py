@@ -80,7 +80,7 @@ _LINES: tuple[tuple[str, ...], ...] = (
 _INT_FIELDS = {
     "ac_org_x", "ac_org_y", "ac_width", "ac_height", "ac_n_buckets", "cn_org_x", "cn_org_y",
     "cn_width", "cn_height", "phase_res", "sign", "time_stamp", "swinfo_type",
-    "swinfo_vers_maj", "swinfo_vers_min", "swinfo_vers_bug",
+    "swinfo_vers_maj", "swinfo_vers_min", "swinfo_vers_bug", "camera_width", "camera_height",
 }
 _MAX_DIM = 1 << 16
 

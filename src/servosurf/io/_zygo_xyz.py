@@ -18,6 +18,7 @@ from ._common import (
     corrupt,
     decode_text,
     make_surface,
+    pixel_origin,
     timestamp_from_iso,
     writer_error,
 )
@@ -147,6 +148,7 @@ def encode_zygo_xyz(surface: Surface) -> bytes:
     """
     md = surface.metadata
     ny, nx = surface.shape
+    ox, oy = pixel_origin(surface)
     if surface.calibrated:
         assert surface.dx is not None and surface.dy is not None
         if abs(surface.dx - surface.dy) > 1e-9 * max(surface.dx, surface.dy):
@@ -170,12 +172,12 @@ def encode_zygo_xyz(surface: Surface) -> bytes:
         "Zygo XYZ Data File - Format 1",
         f'0 0 0 0 {_q("servosurf " + __version__, 29)}',
         "0 0 0 0 0 0",
-        f"0 0 {nx} {ny}",
+        f"{ox} {oy} {nx} {ny}",
         _q(comment, 81),
         _q("", 39),
         _q("", 39),
         f"0 0.5 {wl!r} 0 1 0 {res!r} {ts}",
-        f"{nx} {ny} 0 0 0 0 {_q(obj, 11)}",
+        f"{ox + nx} {oy + ny} 0 0 0 0 {_q(obj, 11)}",
         "0 0 0 0 0 0 0 0 0 0",
         "1 0 0 0 0 0 0 0 0",
         '0 ""',
@@ -183,8 +185,8 @@ def encode_zygo_xyz(surface: Surface) -> bytes:
         _q(zoom, 7),
         "#",
     ]
-    cols = np.tile(np.arange(nx), ny)
-    rows = np.repeat(np.arange(ny), nx)
+    cols = np.tile(np.arange(nx) + ox, ny)
+    rows = np.repeat(np.arange(ny) + oy, nx)
     vals = (surface.z * 1e6).ravel()
     body = [
         f"{c} {r} {v!r}" if v == v else f"{c} {r} No Data"

@@ -1,0 +1,373 @@
+"""Locators: where a residual departs from the noise model, and how surely.
+
+Every test has a stated null distribution under the block's noise model and a
+family-wise false-alarm rate ``ALPHA`` per family of tests (Bonferroni over the
+bands, bins, harmonics, windows or parts of a family):
+
+* averaged periodograms of idle records: ``2 R P/S ~ chi2(2R)`` per bin (lines),
+  summed over third-octave bands (broadband excess or deficit);
+* whitened deterministic residuals: ``|rho_k|^2 ~ chi2(2)`` per bin, at the
+  harmonics of the command (FTS) frequency, in third-octave bands, in time
+  windows and folded on the command cycle;
+* FRF log-ratio residuals: magnitude and phase separately per third-octave band;
+* maps and profiles: along the cut (the tool's time history), across the cut
+  (contact angle), the uncut top, and per integer spindle order.
+
+The same tests on the residual after the fit decide whether anything is left.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy as sp
+
+from ._blocks import CutBlock, ForceBlock, FRFBlock, PointsBlock, SpectralBlock, TimeBlock
+from ._sim import ModelParams
+
+__all__ = ["Mismatch", "ALPHA", "locate", "third_octaves", "tag_frequency"]
+
+#: Family-wise false-alarm rate of each family of tests.
+ALPHA = 1e-4
+
+
+@dataclass
+class Mismatch:
+    """A located departure from the noise model.
+
+    Attributes
+    ----------
+    recording : str
+        Recording name.
+    domain : str
+        ``spectrum``, ``time``, ``frf``, ``force``, ``map`` or ``profile``.
+    where : str
+        Human-readable location (band, line, harmonic, time, part of the map).
+    significance : float
+        ``-log10`` of the Bonferroni-corrected p-value (>= 4 is reported).
+    test : str
+        The test (family) that found it.
+    details : dict
+        Numbers behind ``where`` (frequency in Hz, times in s, ratio...).
+    """
+
+    recording: str
+    domain: str
+    where: str
+    significance: float
+    test: str = ""
+    details: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """JSON-ready form."""
+        return {"recording": self.recording, "domain": self.domain, "where": self.where,
+                "significance": round(float(self.significance), 2), "test": self.test,
+                **({"details": self.details} if self.details else {})}
+
+
+def _sig(p_corr: float) -> float:
+    return float(-math.log10(max(min(p_corr, 1.0), 1e-300)))
+
+
+def _chi2_logsf(x: float, dof: float) -> float:
+    """log10 of the upper tail of chi2(dof) at x, stable in the far tail."""
+    v = sp.stats.chi2.logsf(x, dof)
+    return float(v / math.log(10.0))
+
+
+def third_octaves(fmin: float, fmax: float) -> np.ndarray:
+    """Edges (Hz) of third-octave bands covering [fmin, fmax]."""
+    k0 = math.floor(3 * math.log2(max(fmin, 1e-3) / 1000.0))
+    k1 = math.ceil(3 * math.log2(fmax / 1000.0))
+    return 1000.0 * 2.0 ** (np.arange(k0, k1 + 2) / 3.0)
+
+
+def tag_frequency(f: float, tol: float, refs: dict[str, float]) -> str:
+    """Name ``f`` as a harmonic of a reference (``3 x FTS``) or ``other``."""
+    tags = []
+    for name, f0 in refs.items():
+        if f0 <= 0:
+            continue
+        k = round(f / f0)
+        if k >= 1 and abs(f - k * f0) <= tol and k <= 200:
+            tags.append(f"{k} x {name}")
+    return ", ".join(tags) if tags else "other"
+
+
+def _bands(freq, stat, dof, n_tests, rec, domain, test, label, lower=False):
+    out = []
+    for f_lo, f_hi, s, d in zip(freq[:-1], freq[1:], stat, dof, strict=True):
+        if d <= 0:
+            continue
+        lp = _chi2_logsf(s, d) + math.log10(n_tests)
+        if lp < math.log10(ALPHA):
+            ratio = s / d
+            out.append(Mismatch(rec, domain, f"{label} {f_lo:.0f}-{f_hi:.0f} Hz: "
+                                f"power x{ratio:.3g} of the model", -lp, test,
+                                {"band_hz": [float(f_lo), float(f_hi)],
+                                 "ratio": float(ratio)}))
+        if lower:
+            lc = sp.stats.chi2.logcdf(s, d) / math.log(10.0) + math.log10(n_tests)
+            if lc < math.log10(ALPHA):
+                out.append(Mismatch(rec, domain, f"{label} {f_lo:.0f}-{f_hi:.0f} Hz: "
+                                    f"power x{s / d:.3g} of the model (deficit)", -lc,
+                                    test, {"band_hz": [float(f_lo), float(f_hi)],
+                                           "ratio": float(s / d)}))
+    return out
+
+
+def _spectral(b: SpectralBlock, p: ModelParams, refs: dict) -> list[Mismatch]:
+    s = b.expected(p)
+    u = b.pbar / s
+    R = b.nrec
+    out = []
+    edges = third_octaves(b.freq[0], b.freq[-1] * 1.0001)
+    idx = np.digitize(b.freq, edges) - 1
+    nb = edges.size - 1
+    stat = np.bincount(idx, weights=2 * R * u, minlength=nb)[:nb]
+    dof = 2 * R * np.bincount(idx, minlength=nb)[:nb]
+    nt = int((dof > 0).sum())
+    out += _bands(edges, stat, dof, nt, b.recording, "spectrum", "band-power",
+                  "band", lower=True)
+    # lines: per-bin chi2(2R)
+    lp = sp.stats.chi2.logsf(2 * R * u, 2 * R) / math.log(10.0) + math.log10(u.size)
+    sig = np.nonzero(lp < math.log10(ALPHA))[0]
+    df = b.fs / b.nsamp
+    for k in _peaks(sig, u):
+        f = float(b.freq[k])
+        out.append(Mismatch(b.recording, "spectrum",
+                            f"line at {f:.1f} Hz ({tag_frequency(f, df, refs)}): power "
+                            f"x{u[k]:.3g}", -float(lp[k]), "line",
+                            {"frequency_hz": f, "ratio": float(u[k])}))
+    return out
+
+
+def _peaks(sig: np.ndarray, val: np.ndarray) -> list[int]:
+    """Local maxima of ``val`` among runs of consecutive indices ``sig``."""
+    if sig.size == 0:
+        return []
+    runs = np.split(sig, np.nonzero(np.diff(sig) > 1)[0] + 1)
+    return [int(r[np.argmax(val[r])]) for r in runs]
+
+
+def _fundamental(x: np.ndarray, fs: float) -> float:
+    if x is None or not np.any(x):
+        return 0.0
+    X = np.abs(np.fft.rfft(x - x.mean()))
+    k = int(np.argmax(X[1:])) + 1
+    return k * fs / x.size
+
+
+def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mismatch]:
+    out = []
+    dom = "time"
+    for i, (keep, w, f) in enumerate(b.meta):
+        x = np.fft.rfft(b.residual_time(p, i))[keep] * w
+        e = x.real**2 + x.imag**2
+        if not np.all(np.isfinite(e)):
+            out.append(Mismatch(b.recording, dom, "simulation diverged", 300.0, "global"))
+            continue
+        edges = third_octaves(f[0], f[-1] * 1.0001)
+        idx = np.digitize(f, edges) - 1
+        nb = edges.size - 1
+        stat = np.bincount(idx, weights=e, minlength=nb)[:nb]
+        dof = 2 * np.bincount(idx, minlength=nb)[:nb]
+        out += _bands(edges, stat, dof, int((dof > 0).sum()), b.recording, dom,
+                      "band-power", f"record {i + 1}, band" if len(b.meta) > 1
+                      else "band")
+        df = b.fs / b.records[i]["fe"].size
+        if f0 > 0:
+            ks = np.arange(1, int(min(f[-1], 40 * f0) / f0) + 1)
+            for k in ks:
+                j = int(np.argmin(np.abs(f - k * f0)))
+                if abs(f[j] - k * f0) > df:
+                    continue
+                lp = _chi2_logsf(e[j], 2) + math.log10(ks.size)
+                if lp < math.log10(ALPHA):
+                    out.append(Mismatch(b.recording, dom, f"harmonic {k} of the "
+                                        f"{f0:.4g} Hz command ({f[j]:.1f} Hz)", -lp,
+                                        "harmonic", {"frequency_hz": float(f[j]),
+                                                     "harmonic": int(k)}))
+        lp = sp.stats.chi2.logsf(e, 2) / math.log(10.0) + math.log10(e.size)
+        sig = np.nonzero(lp < math.log10(ALPHA))[0]
+        for k in _peaks(sig, e)[:8]:
+            fk = float(f[k])
+            if f0 > 0 and abs(fk / f0 - round(fk / f0)) * f0 <= df:
+                continue
+            out.append(Mismatch(b.recording, dom, f"line at {fk:.1f} Hz "
+                                f"({tag_frequency(fk, df, refs)})", -float(lp[k]),
+                                "line", {"frequency_hz": fk}))
+        # time windows of the whitened residual
+        wt = b.whitened_time(p, i)
+        n = wt.size
+        nw = max(int(round(2e-3 * b.fs)), 32)
+        m = n // nw
+        if m >= 2:
+            en = (wt[: m * nw] ** 2).reshape(m, nw).sum(axis=1)
+            lp = sp.stats.chi2.logsf(en, nw) / math.log(10.0) + math.log10(m)
+            j = int(np.argmin(lp))
+            if lp[j] < math.log10(ALPHA):
+                t0 = b.records[i].get("t0", 0.0) + j * nw / b.fs
+                frac = float((lp < math.log10(ALPHA)).mean())
+                out.append(Mismatch(b.recording, dom, f"time {1e3 * t0:.2f}-"
+                                    f"{1e3 * (t0 + nw / b.fs):.2f} ms (strongest of "
+                                    f"{100 * frac:.0f} % flagged windows)", -float(lp[j]),
+                                    "time-window", {"t_s": [t0, t0 + nw / b.fs],
+                                                    "flagged_fraction": frac}))
+        if f0 > 0:
+            per = b.fs / f0
+            ncyc = int(n // per)
+            if ncyc >= 3:
+                nph = 20
+                ph = np.floor((np.arange(int(ncyc * per)) % per) / per * nph).astype(int)
+                sums = np.bincount(ph, weights=wt[: ph.size], minlength=nph)
+                cnt = np.bincount(ph, minlength=nph)
+                z2 = sums**2 / np.maximum(cnt, 1)
+                lp = sp.stats.chi2.logsf(z2, 1) / math.log(10.0) + math.log10(nph)
+                j = int(np.argmin(lp))
+                if lp[j] < math.log10(ALPHA):
+                    out.append(Mismatch(b.recording, dom, f"locked to the command "
+                                        f"cycle at phase {j / nph:.2f}-"
+                                        f"{(j + 1) / nph:.2f} ({1e3 * j / nph / f0:.2f} "
+                                        "ms after the cycle start)", -float(lp[j]),
+                                        "cycle-phase", {"phase": [j / nph,
+                                                                  (j + 1) / nph]}))
+    return out
+
+
+def _force(b: ForceBlock, p: ModelParams) -> list[Mismatch]:
+    r = b.residual(p)
+    n = r.size
+    lp = _chi2_logsf(float(r @ r), n)
+    if lp < math.log10(ALPHA):
+        F = b.cut.predict(p)["force"]
+        c = float(np.dot(r, F) / max(np.linalg.norm(F) * np.linalg.norm(r), 1e-300))
+        return [Mismatch(b.recording, "force", f"measured force differs from the chip "
+                         f"model (RMS x{math.sqrt(r @ r / n):.3g} of the noise; "
+                         f"correlation with the modelled force {c:+.2f})", -lp,
+                         "global", {"correlation": c})]
+    return []
+
+
+def _frf(b: FRFBlock, p: ModelParams) -> list[Mismatch]:
+    r = b.residual(p)
+    m = b.freq.size
+    re, im = r[:m], r[m:] if r.size >= 2 * m else r[m:]
+    if re.size != m or im.size != m:  # gain nuisance removes no entries here
+        re, im = r[:m], r[-m:]
+    edges = third_octaves(b.freq[0], b.freq[-1] * 1.0001)
+    idx = np.digitize(b.freq, edges) - 1
+    nb = edges.size - 1
+    out = []
+    for part, v in (("magnitude", re), ("phase", im)):
+        stat = np.bincount(idx, weights=v**2, minlength=nb)[:nb]
+        dof = np.bincount(idx, minlength=nb)[:nb].astype(float)
+        nt = 2 * int((dof > 0).sum())
+        for f_lo, f_hi, s, d in zip(edges[:-1], edges[1:], stat, dof, strict=True):
+            if d <= 0:
+                continue
+            lp = _chi2_logsf(s, d) + math.log10(nt)
+            if lp < math.log10(ALPHA):
+                sel = (b.freq >= f_lo) & (b.freq < f_hi)
+                k = np.argmax(np.abs(v[sel]))
+                fk = float(b.freq[sel][k])
+                val = float(v[sel][k] * b.sigma)
+                txt = (f"{100 * (math.exp(val) - 1):+.2g} %" if part == "magnitude"
+                       else f"{math.degrees(val):+.2g} deg")
+                out.append(Mismatch(b.recording, "frf", f"{part} {f_lo:.0f}-{f_hi:.0f} "
+                                    f"Hz (largest {txt} at {fk:.0f} Hz)", -lp,
+                                    f"frf-{part}", {"band_hz": [float(f_lo),
+                                                                float(f_hi)],
+                                                    "frequency_hz": fk}))
+    return out
+
+
+def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
+    w = b.residual(p)
+    out = []
+    dom = b.domain
+    n_unc = int((~b.cut).sum())
+    n_cut = int(b.cut.sum())
+    parts = []
+    if n_unc:
+        parts.append(("uncut top (instrument noise, piston, tilt)", w[:n_unc]))
+    if n_cut:
+        parts.append(("across the cut (contact angle: tool shape, recovery)",
+                      w[n_unc:n_unc + n_cut]))
+        parts.append(("along the cut (tool height in time: servo, sensor, drift, "
+                      "spindle)", w[n_unc + n_cut:]))
+    for label, v in parts:
+        if v.size == 0:
+            continue
+        dof = v.size if "across" not in label else max(n_cut - b.nb, 1)
+        lp = _chi2_logsf(float(v @ v), dof) + math.log10(len(parts))
+        if lp < math.log10(ALPHA):
+            out.append(Mismatch(b.recording, dom, f"{label}: RMS x"
+                                f"{math.sqrt(float(v @ v) / dof):.3g} of the noise",
+                                -lp, "part", {}))
+    # integer spindle orders on the along-cut residual (unwhitened, per time bin)
+    if n_cut and b.nb > 8:
+        r = b.nuisance_fit(p)[b.cut]
+        bins = b.bins[b.cut]
+        mb = np.bincount(bins, weights=r, minlength=b.nb) / np.maximum(b.counts, 1)
+        th = np.bincount(bins, weights=b.pts.theta[b.cut], minlength=b.nb) \
+            / np.maximum(b.counts, 1)
+        span = np.ptp(np.unwrap(np.sort(th)))
+        hmax = 40
+        if span > 0.5:
+            var = float(np.var(mb))
+            res = []
+            for h in range(1, hmax + 1):
+                a = np.column_stack([np.cos(h * th), np.sin(h * th), np.ones_like(th)])
+                c, *_ = np.linalg.lstsq(a, mb, rcond=None)
+                res.append((h, math.hypot(c[0], c[1])))
+            amps = np.array([v for _, v in res])
+            z = amps**2 * mb.size / 4 / max(var, 1e-300)
+            lp = sp.stats.chi2.logsf(2 * z, 2) / math.log(10.0) + math.log10(hmax)
+            for h in np.argsort(lp)[:3]:
+                if lp[h] < math.log10(ALPHA):
+                    out.append(Mismatch(b.recording, dom, f"spindle order {h + 1} "
+                                        f"(amplitude {amps[h] * 1e9:.3g} nm)",
+                                        -float(lp[h]), "spindle-order",
+                                        {"order": int(h + 1),
+                                         "amplitude_m": float(amps[h])}))
+    return out
+
+
+def locate(blocks, p: ModelParams, refs: dict[str, float]) -> list[Mismatch]:
+    """Run every locator on every block's residual under ``p``.
+
+    Parameters
+    ----------
+    blocks : list of Block
+        The likelihood blocks.
+    p : ModelParams
+        Model whose residual is examined (nominal: "where is the mismatch";
+        fitted: "what is left").
+    refs : dict of str to float
+        Reference frequencies (Hz) for harmonic tags: spindle, FTS, mains.
+
+    Returns
+    -------
+    list of Mismatch
+        Sorted by decreasing significance.
+    """
+    out: list[Mismatch] = []
+    for b in blocks:
+        if isinstance(b, SpectralBlock):
+            out += _spectral(b, p, refs)
+        elif isinstance(b, CutBlock):
+            out += _timeblock(b, p, refs, refs.get("FTS", 0.0))
+        elif isinstance(b, TimeBlock):
+            cmd = b.records[0].get("command")
+            out += _timeblock(b, p, refs, _fundamental(cmd, b.fs))
+        elif isinstance(b, ForceBlock):
+            out += _force(b, p)
+        elif isinstance(b, FRFBlock):
+            out += _frf(b, p)
+        elif isinstance(b, PointsBlock):
+            out += _points(b, p)
+    out.sort(key=lambda m: -m.significance)
+    return out
