@@ -24,7 +24,9 @@ def test_builtin_loads_and_is_listed():
 
 def test_unknown_key_suggests(tmp_path):
     p = write(tmp_path, "[controller]\nbandwith = 500.0\n")
-    with pytest.raises(ConfigError, match=r"controller\.bandwith.*Did you mean: controller\.bandwidth"):
+    with pytest.raises(
+        ConfigError, match=r"controller\.bandwith.*Did you mean: controller\.bandwidth"
+    ):
         load_machine(p)
 
 
@@ -36,7 +38,9 @@ def test_out_of_range_names_dotted_key(tmp_path):
 
 def test_type_mismatch(tmp_path):
     p = write(tmp_path, '[sensor]\nbandwidth = "fast"\n')
-    with pytest.raises(ConfigError, match=r"sensor\.bandwidth: expected float, got str"):
+    with pytest.raises(
+        ConfigError, match=r"sensor\.bandwidth: expected float, got str"
+    ):
         load_machine(p)
 
 
@@ -65,10 +69,20 @@ def test_inherit_changes_only_given_keys(tmp_path):
 def test_every_parameter_documented():
     rows = describe_machine()
     keys = {r["key"] for r in rows}
-    for k in ("mechanics.m1", "mechanics.k5", "mechanics.c3", "actuator.force-constant",
-              "actuator.current-gain", "actuator.current-bandwidth", "sensor.sensitivity",
-              "sensor.bandwidth", "controller.sample-rate", "controller.delay",
-              "controller.bandwidth", "controller.kp"):
+    for k in (
+        "mechanics.m1",
+        "mechanics.k5",
+        "mechanics.c3",
+        "actuator.force-constant",
+        "actuator.current-gain",
+        "actuator.current-bandwidth",
+        "sensor.sensitivity",
+        "sensor.bandwidth",
+        "controller.sample-rate",
+        "controller.delay",
+        "controller.bandwidth",
+        "controller.kp",
+    ):
         assert k in keys
     for r in rows:
         assert r["doc"], r["key"]

@@ -12,8 +12,18 @@ import importlib
 __version__ = "0.1.0"
 
 _SUBPACKAGES = (
-    "servo", "noise", "cutting", "toolpath", "kernels", "metrology", "io", "viz",
-    "diagnose", "config", "errors", "units",
+    "servo",
+    "noise",
+    "cutting",
+    "toolpath",
+    "kernels",
+    "metrology",
+    "io",
+    "viz",
+    "diagnose",
+    "config",
+    "errors",
+    "units",
 )
 
 __all__ = ["__version__", *_SUBPACKAGES]

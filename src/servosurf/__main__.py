@@ -1,4 +1,5 @@
 """``python -m servosurf``."""
+
 import sys
 
 from .cli import main

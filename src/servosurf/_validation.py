@@ -61,18 +61,28 @@ def check_in_range(
 
 
 def check_array(
-    value, /, *, name: str, ndim: int | None = None, finite: bool = False,
-    min_size: int = 1, dtype=np.float64,
+    value,
+    /,
+    *,
+    name: str,
+    ndim: int | None = None,
+    finite: bool = False,
+    min_size: int = 1,
+    dtype=np.float64,
 ) -> np.ndarray:
     """Return ``value`` as a contiguous array after checking its shape and values."""
     try:
         a = np.ascontiguousarray(value, dtype=dtype)
     except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a numeric array, got {type(value).__name__}") from None
+        raise ConfigError(
+            f"{name} must be a numeric array, got {type(value).__name__}"
+        ) from None
     if ndim is not None and a.ndim != ndim:
         raise ConfigError(f"{name} must be {ndim}-dimensional, got shape {a.shape}")
     if a.size < min_size:
-        raise ConfigError(f"{name} must have at least {min_size} element(s), got {a.size}")
+        raise ConfigError(
+            f"{name} must have at least {min_size} element(s), got {a.size}"
+        )
     if finite and not np.all(np.isfinite(a)):
         raise ConfigError(f"{name} must have finite values")
     return a

@@ -72,8 +72,14 @@ def param(
     dataclasses.Field
         The field descriptor.
     """
-    meta = {"unit": unit, "doc": doc, "source": source, "low": low, "high": high,
-            "low_open": low_open}
+    meta = {
+        "unit": unit,
+        "doc": doc,
+        "source": source,
+        "low": low,
+        "high": high,
+        "low_open": low_open,
+    }
     kw: dict[str, Any] = {"metadata": meta}
     if default is not dataclasses.MISSING:
         kw["default"] = default
@@ -152,8 +158,10 @@ def _convert(value: Any, tp: Any, dotted: str) -> Any:
                 raise ConfigError(
                     f"{dotted}: expected {len(args)} items, got {len(value)}"
                 )
-            return tuple(_convert(v, a, f"{dotted}[{i}]")
-                         for i, (v, a) in enumerate(zip(value, args, strict=True)))
+            return tuple(
+                _convert(v, a, f"{dotted}[{i}]")
+                for i, (v, a) in enumerate(zip(value, args, strict=True))
+            )
         inner = args[0] if args else Any
         out = [_convert(v, inner, f"{dotted}[{i}]") for i, v in enumerate(value)]
         return tuple(out) if origin is tuple else out
@@ -174,7 +182,9 @@ def _convert(value: Any, tp: Any, dotted: str) -> Any:
             raise ConfigError(f"{dotted}: expected str, got {type(value).__name__}")
         return value
     if isinstance(tp, type) and not isinstance(value, tp):
-        raise ConfigError(f"{dotted}: expected {tp.__name__}, got {type(value).__name__}")
+        raise ConfigError(
+            f"{dotted}: expected {tp.__name__}, got {type(value).__name__}"
+        )
     return value
 
 
@@ -211,7 +221,11 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], *, prefix: str = "") -> 
         if name is None:
             known = sorted(_kebab(n) for n in fields)
             sugg = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
-            hint = f" Did you mean: {prefix + '.' if prefix else ''}{sugg[0]}?" if sugg else ""
+            hint = (
+                f" Did you mean: {prefix + '.' if prefix else ''}{sugg[0]}?"
+                if sugg
+                else ""
+            )
             raise ConfigError(
                 f"unknown key {dotted!r}.{hint} Allowed keys here: {', '.join(known)}"
             )
@@ -220,13 +234,16 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], *, prefix: str = "") -> 
         _check_bounds(converted, f.metadata, dotted)
         kwargs[name] = converted
     missing = [
-        n for n, f in fields.items()
+        n
+        for n, f in fields.items()
         if n not in kwargs
         and f.default is dataclasses.MISSING
         and f.default_factory is dataclasses.MISSING
     ]
     if missing:
-        keys = ", ".join(f"{prefix + '.' if prefix else ''}{_kebab(n)}" for n in missing)
+        keys = ", ".join(
+            f"{prefix + '.' if prefix else ''}{_kebab(n)}" for n in missing
+        )
         raise ConfigError(f"missing required key(s): {keys}")
     try:
         return cls(**kwargs)
@@ -308,12 +325,18 @@ def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
     lines = [f"# {h}" for h in header.splitlines()] if header else []
 
     def is_table_array(v: Any) -> bool:
-        return isinstance(v, list | tuple) and bool(v) and all(
-            isinstance(x, Mapping) for x in v)
+        return (
+            isinstance(v, list | tuple)
+            and bool(v)
+            and all(isinstance(x, Mapping) for x in v)
+        )
 
     def emit(table: Mapping[str, Any], path: str, array: bool = False) -> None:
-        scalars = {k: v for k, v in table.items()
-                   if not isinstance(v, Mapping) and not is_table_array(v)}
+        scalars = {
+            k: v
+            for k, v in table.items()
+            if not isinstance(v, Mapping) and not is_table_array(v)
+        }
         subs = {k: v for k, v in table.items() if isinstance(v, Mapping)}
         arrays = {k: v for k, v in table.items() if is_table_array(v)}
         if array:
@@ -356,7 +379,13 @@ def describe(cls: type, *, prefix: str = "") -> list[dict[str, Any]]:
             rows.extend(describe(tp, prefix=key))
             continue
         default = f.default if f.default is not dataclasses.MISSING else None
-        rows.append({"key": key, "unit": f.metadata.get("unit", ""),
-                     "doc": f.metadata.get("doc", ""),
-                     "source": f.metadata.get("source", ""), "default": default})
+        rows.append(
+            {
+                "key": key,
+                "unit": f.metadata.get("unit", ""),
+                "doc": f.metadata.get("doc", ""),
+                "source": f.metadata.get("source", ""),
+                "default": default,
+            }
+        )
     return rows

@@ -174,7 +174,9 @@ def simulate(
 
     bad = [p for p in parts if p not in PARTS]
     if bad:
-        raise ConfigError(f"unknown deviation part {bad[0]!r}; allowed: {', '.join(PARTS)}")
+        raise ConfigError(
+            f"unknown deviation part {bad[0]!r}; allowed: {', '.join(PARTS)}"
+        )
     if not isinstance(seed, int | np.integer) or seed < 0:
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
     spec = toolpath if isinstance(toolpath, ToolpathSpec) else load_toolpath(toolpath)
@@ -229,11 +231,16 @@ def simulate(
             kt = workpiece.material.specific_thrust_pressure
             top = workpiece.precut.height
             if spec.kind == "lenslet":
-                cut = loop.simulate(reference=ref, chip=ChipModel(kt, tool.nose_radius, top),
-                                    chip_offset=offset)
+                cut = loop.simulate(
+                    reference=ref,
+                    chip=ChipModel(kt, tool.nose_radius, top),
+                    chip_offset=offset,
+                )
             else:  # facing: steady feed-limited chip, ramped in over one revolution
                 p = spec.path
-                area = facing_chip_area(tool.nose_radius, p.feed_per_rev, p.depth_of_cut)
+                area = facing_chip_area(
+                    tool.nose_radius, p.feed_per_rev, p.depth_of_cut
+                )
                 ramp = np.clip((t - t[0]) * p.rev_per_s, 0.0, 1.0)
                 cut = loop.simulate(reference=ref, force=kt * area * ramp)
             dev["force"] = cut["tool"] - base["tool"]
@@ -254,7 +261,9 @@ def simulate(
         dev["hooks"] = extra
 
     with _progress.stage("toolpath samples over the field"):
-        path = sample(spec, fs=fs, field=spec.field, tool=tool, reach=_reach(spec, tool))
+        path = sample(
+            spec, fs=fs, field=spec.field, tool=tool, reach=_reach(spec, tool)
+        )
         idx = path.index - k0
         if idx.size and (idx.min() < 0 or idx.max() >= n):
             raise ConfigError("internal: the deviation record does not cover the field")
@@ -272,20 +281,32 @@ def simulate(
             initial = read_surface(workpiece.precut.file)
         surface = sweep(path, tool, spec.field, initial=initial, n_threads=n_threads)
 
-    ctx = {"spec": spec, "machine": machine, "t": t, "z_command": z_cmd, "deviation": dev,
-           "force": force, "seed": seed}
+    ctx = {
+        "spec": spec,
+        "machine": machine,
+        "t": t,
+        "z_command": z_cmd,
+        "deviation": dev,
+        "force": force,
+        "seed": seed,
+    }
     for h in hooks:
         if hasattr(h, "surface"):
             surface = h.surface(surface, ctx)
 
     settings = {
-        "toolpath_kind": spec.kind, "seed": int(seed), "parts": list(parts),
+        "toolpath_kind": spec.kind,
+        "seed": int(seed),
+        "parts": list(parts),
         "bandwidth_hz": machine.controller.bandwidth,
         "bandwidth_definition": "open-loop crossover",
-        "moving_mass_kg": machine.mechanics.moving_mass, "machine": machine.name,
-        "disturbances": machine.disturbances.name, "workpiece": workpiece.name,
+        "moving_mass_kg": machine.mechanics.moving_mass,
+        "machine": machine.name,
+        "disturbances": machine.disturbances.name,
+        "workpiece": workpiece.name,
         "specific_thrust_pressure_pa": workpiece.material.specific_thrust_pressure,
-        "controller_rate_hz": fs, "hooks": [type(h).__name__ for h in hooks],
+        "controller_rate_hz": fs,
+        "hooks": [type(h).__name__ for h in hooks],
     }
     surface = surface.replace(metadata={**surface.metadata, "simulation": settings})
     measured = None
@@ -293,10 +314,22 @@ def simulate(
         with _progress.stage("interferometer model"):
             from .metrology._interferometer import load_instrument, measure
 
-            inst = load_instrument(instrument) if isinstance(instrument, str | dict) \
+            inst = (
+                load_instrument(instrument)
+                if isinstance(instrument, str | dict)
                 else instrument
+            )
             measured = measure(surface, inst, seed=int(seed))
-    return SimulationResult(surface=surface, measured=measured, t=t, z_command=z_cmd,
-                            deviation=dev, force=force, following_error=fol,
-                            machine=machine, spec=spec, workpiece=workpiece,
-                            settings=settings)
+    return SimulationResult(
+        surface=surface,
+        measured=measured,
+        t=t,
+        z_command=z_cmd,
+        deviation=dev,
+        force=force,
+        following_error=fol,
+        machine=machine,
+        spec=spec,
+        workpiece=workpiece,
+        settings=settings,
+    )

@@ -72,7 +72,9 @@ def normalise_unit(unit: str) -> str:
     if key in _ALIASES:
         return _ALIASES[key]
     allowed = ", ".join(sorted(LENGTH_UNITS))
-    raise UnitError(f"unknown length unit {unit!r}; allowed: {allowed} (or spelled out)")
+    raise UnitError(
+        f"unknown length unit {unit!r}; allowed: {allowed} (or spelled out)"
+    )
 
 
 def length_factor(unit: str) -> float:

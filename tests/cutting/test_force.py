@@ -23,7 +23,9 @@ def test_segment_area_closed_form_and_kernel():
     chord = 2 * np.sqrt(2 * r * 5e-6 - 25e-12)
     np.testing.assert_allclose(segment_area(r, 5e-6), 2 / 3 * chord * 5e-6, rtol=0.01)
     for di in d:
-        np.testing.assert_allclose(_segment_area(r, di), segment_area(r, di), rtol=1e-12)
+        np.testing.assert_allclose(
+            _segment_area(r, di), segment_area(r, di), rtol=1e-12
+        )
     # the paper's 5 um lenslet: about 471 um^2
     np.testing.assert_allclose(segment_area(r, 5e-6), 471e-12, rtol=0.01)
 
@@ -31,7 +33,9 @@ def test_segment_area_closed_form_and_kernel():
 def test_chip_model_force():
     chip = ChipModel(1e9, 0.5e-3, 0.0)
     assert chip.force(np.array([1e-6]))[0] == 0.0  # tool above the face
-    np.testing.assert_allclose(chip.force(np.array([-5e-6]))[0], 1e9 * segment_area(0.5e-3, 5e-6))
+    np.testing.assert_allclose(
+        chip.force(np.array([-5e-6]))[0], 1e9 * segment_area(0.5e-3, 5e-6)
+    )
 
 
 def test_facing_chip_area_is_feed_times_depth():
@@ -45,7 +49,9 @@ def test_workpiece_file_and_errors(tmp_path):
     assert wp.material.specific_thrust_pressure > 0
     p = tmp_path / "w.toml"
     p.write_text("[material]\nspecific-thrust-presure = 1e9\n")
-    with pytest.raises(ConfigError, match="Did you mean: material.specific-thrust-pressure"):
+    with pytest.raises(
+        ConfigError, match="Did you mean: material.specific-thrust-pressure"
+    ):
         load_workpiece(p)
     p.write_text('[precut]\nkind = "file"\n')
     with pytest.raises(ConfigError, match="precut.file"):

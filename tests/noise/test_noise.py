@@ -47,9 +47,11 @@ def test_following_sensor_term_is_sensitivity(loop):
     b = synthesize(loop)
     frf = loop.frf(b.freq)
     one_minus = 1 - frf.complementary
-    np.testing.assert_allclose(b.following["sensor_noise"],
-                               b.disturbance["sensor_noise"] * np.abs(one_minus) ** 2,
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        b.following["sensor_noise"],
+        b.disturbance["sensor_noise"] * np.abs(one_minus) ** 2,
+        rtol=1e-9,
+    )
 
 
 def test_realisation_rms_matches_cas(loop):
@@ -105,26 +107,32 @@ def test_psd_csv_round_trip_and_model(tmp_path):
     np.testing.assert_allclose(p2, p, rtol=1e-8)
     model = PSDModel(csv=str(path))
     fq = np.array([100.0, 3000.0])
-    np.testing.assert_allclose(evaluate_psd(model, fq), 1e-24 * (fq / 1e3) ** -1, rtol=1e-6)
+    np.testing.assert_allclose(
+        evaluate_psd(model, fq), 1e-24 * (fq / 1e3) ** -1, rtol=1e-6
+    )
     # outside the measured range the PSD is zero, not extrapolated
     assert evaluate_psd(model, np.array([1.0]))[0] == 0.0
 
 
 def test_parametric_psd_formula():
-    m = PSDModel(level=2e-12, ref_frequency=1e3, slope=0.5, corner=1e4, order=2,
-                 floor=1e-12)
+    m = PSDModel(
+        level=2e-12, ref_frequency=1e3, slope=0.5, corner=1e4, order=2, floor=1e-12
+    )
     f = np.array([1e3, 1e4])
     expected = (4e-24 * (f / 1e3) ** 0.5 + 1e-24) / (1 + (f / 1e4) ** 2)
     np.testing.assert_allclose(evaluate_psd(m, f), expected, rtol=1e-12)
 
 
-@pytest.mark.parametrize("text, match", [
-    ("freq,psd\n1,2\n2,3\n", "header"),
-    ("frequency_hz,psd\n1,2\n", "at least 2"),
-    ("frequency_hz,psd\n2,1\n1,1\n", "increasing"),
-    ("frequency_hz,psd\n1,-1\n2,1\n", ">= 0"),
-    ("frequency_hz,psd\n1,a\n2,1\n", "two numbers"),
-])
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("freq,psd\n1,2\n2,3\n", "header"),
+        ("frequency_hz,psd\n1,2\n", "at least 2"),
+        ("frequency_hz,psd\n2,1\n1,1\n", "increasing"),
+        ("frequency_hz,psd\n1,-1\n2,1\n", ">= 0"),
+        ("frequency_hz,psd\n1,a\n2,1\n", "two numbers"),
+    ],
+)
 def test_psd_csv_errors(text, match):
     with pytest.raises(ConfigError, match=match):
         read_psd_csv(io.StringIO(text))
@@ -152,9 +160,12 @@ def test_vibration_stream_segments_consistent_and_spectrum(loop):
     whole = vs.segment(0, 300_000)
     # any sub-range equals the slice of a longer range (tiling-independent), also
     # across the white-noise block boundary at 65536
-    np.testing.assert_allclose(vs.segment(65_000, 2_000), whole[65_000:67_000],
-                               rtol=0, atol=1e-22)  # exact up to FFT rounding
-    np.testing.assert_allclose(vs.segment(123_456, 7), whole[123_456:123_463], atol=1e-22)
+    np.testing.assert_allclose(
+        vs.segment(65_000, 2_000), whole[65_000:67_000], rtol=0, atol=1e-22
+    )  # exact up to FFT rounding
+    np.testing.assert_allclose(
+        vs.segment(123_456, 7), whole[123_456:123_463], atol=1e-22
+    )
     b = synthesize(loop)
     # the FIR's energy is the synthesised RMS (window smoothing keeps the power)
     np.testing.assert_allclose(vs.rms, b.rms_real(), rtol=0.03)
@@ -163,8 +174,9 @@ def test_vibration_stream_segments_consistent_and_spectrum(loop):
     sel = (f > 200) & (f < 40e3)
     ratio = p[sel] / synthesize(loop, freq=f[sel]).real_total
     assert abs(np.median(ratio) - 1) < 0.1
-    assert not np.allclose(VibrationStream(loop, seed=10).segment(0, 1000), whole[:1000],
-                           rtol=1e-3, atol=0)
+    assert not np.allclose(
+        VibrationStream(loop, seed=10).segment(0, 1000), whole[:1000], rtol=1e-3, atol=0
+    )
 
 
 def test_vibration_stream_memmap(tmp_path, loop):

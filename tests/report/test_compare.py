@@ -26,13 +26,14 @@ def test_registration_recovers_subpixel_shift(lens_map):
     rng = np.random.default_rng(11)
     true = (2.37e-6, -1.61e-6)  # m: (dy, dx)
     moved = shift_surface(lens_map, *true)
-    yy, xx = np.mgrid[0:moved.shape[0], 0:moved.shape[1]]
+    yy, xx = np.mgrid[0 : moved.shape[0], 0 : moved.shape[1]]
     tilt = 2e-9 * xx - 1e-9 * yy  # m per pixel
     noisy = moved.replace(z=moved.z + tilt + rng.normal(0, 2e-9, moved.shape))
     out = compare_surfaces(noisy, lens_map)
     # the simulated map must be shifted by `true` to land on the measured one
-    np.testing.assert_allclose(out["shift_px"], [true[0] / 1e-6, true[1] / 1e-6],
-                               atol=SHIFT_PX_TOL)
+    np.testing.assert_allclose(
+        out["shift_px"], [true[0] / 1e-6, true[1] / 1e-6], atol=SHIFT_PX_TOL
+    )
     assert out["rms_residual_m"] < 5e-9
     assert out["fit_percent"] > 95
     assert out["correlation"] > 0.999

@@ -31,13 +31,21 @@ def test_identify_recovers_parameters(tmp_path):
     rng = np.random.default_rng(2024)
     nominal = load_machine()
     truth = nominal
-    factors = {"mechanics.m1": 1.2, "mechanics.m2": 0.9, "mechanics.k1": 1.3,
-               "mechanics.c1": 0.7, "mechanics.k2": 1.5, "mechanics.c2": 1.4}
+    factors = {
+        "mechanics.m1": 1.2,
+        "mechanics.m2": 0.9,
+        "mechanics.k1": 1.3,
+        "mechanics.c1": 0.7,
+        "mechanics.k2": 1.5,
+        "mechanics.c2": 1.4,
+    }
     for k, fac in factors.items():
         truth = set_param(truth, k, get_param(nominal, k) * fac)
     f = np.geomspace(10, 30e3, 400)
     y = open_loop_frf(truth, f)
-    y = y * (1 + 0.01 * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)))
+    y = y * (
+        1 + 0.01 * (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size))
+    )
     path = tmp_path / "ol.csv"
     write_frf_csv(path, f, y)
     f2, y2 = read_frf_csv(path)
@@ -45,8 +53,9 @@ def test_identify_recovers_parameters(tmp_path):
     assert res.fit_percent_after > 97.0
     assert res.fit_percent_after > res.fit_percent_before
     for k in DEFAULT_IDENT_PARAMS:
-        np.testing.assert_allclose(res.parameters[k], get_param(truth, k), rtol=PARAM_RTOL,
-                                   err_msg=k)
+        np.testing.assert_allclose(
+            res.parameters[k], get_param(truth, k), rtol=PARAM_RTOL, err_msg=k
+        )
 
 
 def test_bad_frf_file(tmp_path):
@@ -65,8 +74,17 @@ def test_identify_cli_writes_loadable_machine(tmp_path, capsys):
     truth = set_param(nominal, "mechanics.k2", 3.0e4)
     f = np.geomspace(10, 30e3, 300)
     write_frf_csv(tmp_path / "ol.csv", f, open_loop_frf(truth, f))
-    rc = main(["identify", str(tmp_path / "ol.csv"), "--param", "mechanics.k2",
-               "--out", str(tmp_path / "id"), "--json"])
+    rc = main(
+        [
+            "identify",
+            str(tmp_path / "ol.csv"),
+            "--param",
+            "mechanics.k2",
+            "--out",
+            str(tmp_path / "id"),
+            "--json",
+        ]
+    )
     assert rc == 0
     data = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(data["parameters"]["mechanics.k2"], 3.0e4, rtol=1e-6)

@@ -54,8 +54,9 @@ def test_tuning_hits_crossover_and_margin(machine):
 
 
 def test_tuning_infeasible_raises(machine):
-    c = dataclasses.replace(machine.controller, phase_margin=89.0,
-                            derivative_filter_ratio=1.0)
+    c = dataclasses.replace(
+        machine.controller, phase_margin=89.0, derivative_filter_ratio=1.0
+    )
     with pytest.raises(ModelError, match="cannot tune"):
         tune_pidf(dataclasses.replace(machine, controller=c))
 
@@ -97,10 +98,12 @@ def test_closed_loop_matches_python_control(machine):
     # current noise -> tool: Bl p_a1 - p_a1 fwd sens Bl p_am / (1 + L)
     i_tool = bl * p_a1 - p_a1 * fwd * sens * bl * p_am * s_tf
     w = 2 * np.pi * f
-    for key, sys in (((("reference", "tool")), t_r_tool),
-                     ((("reference", "following_error")), s_tf),
-                     ((("force", "tool")), f_tool),
-                     ((("current_noise", "tool")), i_tool)):
+    for key, sys in (
+        ((("reference", "tool")), t_r_tool),
+        ((("reference", "following_error")), s_tf),
+        ((("force", "tool")), f_tool),
+        ((("current_noise", "tool")), i_tool),
+    ):
         ref = ct.frequency_response(sys, w).complex.ravel()
         np.testing.assert_allclose(ours[key], ref, rtol=1e-6, err_msg=str(key))
 
@@ -163,6 +166,7 @@ def test_moving_mass_goes_to_configured_mass():
     assert heavy.mechanics.moving_mass == pytest.approx(0.175)
     target = m.mechanics.added_mass_on
     assert getattr(heavy.mechanics, target) == pytest.approx(
-        getattr(m.mechanics, target) + 0.1)
+        getattr(m.mechanics, target) + 0.1
+    )
     with pytest.raises(ConfigError, match="--mass"):
         m.with_moving_mass(0.001)

@@ -10,7 +10,7 @@ import pytest
 
 from servosurf.cli import main
 from servosurf.errors import ConfigError
-from servosurf.servo import ServoLoop, load_machine
+from servosurf.servo import ServoLoop
 from servosurf.simulation import simulate
 from servosurf.toolpath import load_toolpath
 
@@ -52,8 +52,13 @@ def test_force_deviation_scales_with_thrust_pressure(small_lens):
 
     def run(kt):
         wp = Workpiece(material=Material(specific_thrust_pressure=kt))
-        return simulate(small_lens, parts=("tracking", "force"), workpiece=wp,
-                        bandwidth=1448, mass=0.175).deviation["force"]
+        return simulate(
+            small_lens,
+            parts=("tracking", "force"),
+            workpiece=wp,
+            bandwidth=1448,
+            mass=0.175,
+        ).deviation["force"]
 
     a, b = run(0.5e9), run(1.0e9)
     # the chip depends on the deviated position, so the response is only nearly
@@ -78,27 +83,52 @@ def test_bad_inputs(small_lens):
 
 
 def test_simulate_cli_json_keys(tmp_path, capsys):
-    rc = main(["simulate", LENS, "--out", str(tmp_path / "s"), "--json", "--no-render",
-               "--format", "npz"])
+    rc = main(
+        [
+            "simulate",
+            LENS,
+            "--out",
+            str(tmp_path / "s"),
+            "--json",
+            "--no-render",
+            "--format",
+            "npz",
+        ]
+    )
     assert rc == 0
     data = json.loads(capsys.readouterr().out)
-    for key in ("form_error_max_m", "form_error_lag_m", "spectrum_peaks_per_m", "ra_m",
-                "sa_m", "sq_m"):
+    for key in (
+        "form_error_max_m",
+        "form_error_lag_m",
+        "spectrum_peaks_per_m",
+        "ra_m",
+        "sa_m",
+        "sq_m",
+    ):
         assert key in data
     assert 150e-9 < data["form_error_max_m"] < 350e-9
     assert data["form_error_lag_m"] > 0
     assert any(abs(p - 173e3) < 10e3 for p in data["spectrum_peaks_per_m"][:3])
-    for name in ("map.png", "profile.png", "spectrum.png", "highpass.png", "summary.json",
-                 "surface.npz"):
+    for name in (
+        "map.png",
+        "profile.png",
+        "spectrum.png",
+        "highpass.png",
+        "summary.json",
+        "surface.npz",
+    ):
         assert (tmp_path / "s" / name).stat().st_size > 0
 
 
-@pytest.mark.parametrize("argv, match", [
-    (["simulate", "nope.toml"], "not found"),
-    (["simulate", LENS, "--bandwidth", "-5"], "--bandwidth"),
-    (["simulate", LENS, "--mass", "0"], "--mass"),
-    (["simulate", LENS, "--bandwidth", "5000"], "bandwidth"),
-])
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["simulate", "nope.toml"], "not found"),
+        (["simulate", LENS, "--bandwidth", "-5"], "--bandwidth"),
+        (["simulate", LENS, "--mass", "0"], "--mass"),
+        (["simulate", LENS, "--bandwidth", "5000"], "bandwidth"),
+    ],
+)
 def test_simulate_cli_errors(argv, match, capsys, tmp_path):
     assert main(argv + ["--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err.strip().splitlines()

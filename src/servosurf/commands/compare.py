@@ -7,31 +7,62 @@ import argparse
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "compare", help="compare a measured map with a simulation (registration, residual)",
+        "compare",
+        help="compare a measured map with a simulation (registration, residual)",
         description="Bring a measured and a simulated map onto one grid (the coarser "
         "pitch), register them with sub-pixel accuracy (lenslet by lenslet when the map "
         "holds a lenslet array), remove piston/tilt/sphere and report the residual, "
         "profile and spectra overlays and metrics (RMS and PV residual in m, fit %, "
-        "correlation).")
-    p.add_argument("measured", metavar="MEASURED", help="measured map (any readable format)")
+        "correlation).",
+    )
+    p.add_argument(
+        "measured", metavar="MEASURED", help="measured map (any readable format)"
+    )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--simulated", metavar="FILE", help="simulated map file")
-    src.add_argument("--toolpath", metavar="T.toml", help="simulate this toolpath first")
+    src.add_argument(
+        "--toolpath", metavar="T.toml", help="simulate this toolpath first"
+    )
     p.add_argument("--machine", metavar="M.toml", help="machine for --toolpath")
     p.add_argument("--workpiece", metavar="W.toml", help="workpiece for --toolpath")
-    p.add_argument("--bandwidth", metavar="HZ", type=float, default=1448.0,
-                   help="crossover bandwidth in Hz for --toolpath (default 1448)")
-    p.add_argument("--mass", metavar="KG", type=float, default=0.175,
-                   help="moving mass in kg for --toolpath (default 0.175)")
-    p.add_argument("--seed", metavar="N", type=int, default=0, help="seed for --toolpath")
-    p.add_argument("--remove", metavar="TERM", nargs="*", default=["piston", "tilt"],
-                   choices=("piston", "tilt", "sphere"),
-                   help="form terms removed from the residual (default piston tilt)")
-    p.add_argument("--axis", choices=("x", "y"), default="y",
-                   help="cutting direction for the spectra: y (along columns, the "
-                   "simulated-lenslet convention) or x (default y)")
-    p.add_argument("--no-register", action="store_true", help="do not register the maps")
-    p.add_argument("--out", metavar="DIR", default="results/compare", help="output directory")
+    p.add_argument(
+        "--bandwidth",
+        metavar="HZ",
+        type=float,
+        default=1448.0,
+        help="crossover bandwidth in Hz for --toolpath (default 1448)",
+    )
+    p.add_argument(
+        "--mass",
+        metavar="KG",
+        type=float,
+        default=0.175,
+        help="moving mass in kg for --toolpath (default 0.175)",
+    )
+    p.add_argument(
+        "--seed", metavar="N", type=int, default=0, help="seed for --toolpath"
+    )
+    p.add_argument(
+        "--remove",
+        metavar="TERM",
+        nargs="*",
+        default=["piston", "tilt"],
+        choices=("piston", "tilt", "sphere"),
+        help="form terms removed from the residual (default piston tilt)",
+    )
+    p.add_argument(
+        "--axis",
+        choices=("x", "y"),
+        default="y",
+        help="cutting direction for the spectra: y (along columns, the "
+        "simulated-lenslet convention) or x (default y)",
+    )
+    p.add_argument(
+        "--no-register", action="store_true", help="do not register the maps"
+    )
+    p.add_argument(
+        "--out", metavar="DIR", default="results/compare", help="output directory"
+    )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     return p
 
@@ -53,19 +84,32 @@ def run(args) -> int:
         else:
             from ..simulation import simulate
 
-            res = simulate(args.toolpath, machine=args.machine, workpiece=args.workpiece,
-                           bandwidth=args.bandwidth, mass=args.mass, seed=args.seed)
+            res = simulate(
+                args.toolpath,
+                machine=args.machine,
+                workpiece=args.workpiece,
+                bandwidth=args.bandwidth,
+                mass=args.mass,
+                seed=args.seed,
+            )
             simulated = res.measured if res.measured is not None else res.surface
     with stage("registration and residual"):
-        out = compare_surfaces(measured, simulated, remove=tuple(args.remove),
-                               axis=0 if args.axis == "y" else 1,
-                               register=not args.no_register)
+        out = compare_surfaces(
+            measured,
+            simulated,
+            remove=tuple(args.remove),
+            axis=0 if args.axis == "y" else 1,
+            register=not args.no_register,
+        )
     plots = out.pop("_plots")
     d = out_dir(args.out)
     with stage("figures"):
-        plot_map(plots["residual"], d / "residual.png",
-                 title=f"residual (measured - simulated), RMS "
-                       f"{out['rms_residual_m'] * 1e9:.2f} nm")
+        plot_map(
+            plots["residual"],
+            d / "residual.png",
+            title=f"residual (measured - simulated), RMS "
+            f"{out['rms_residual_m'] * 1e9:.2f} nm",
+        )
         fm, pm, fs_, ps = plots["spectra"]
         fig, ax = figure(figsize=(8, 4.5))
         ax.semilogy(fm / 1e3, pm * 1e21, label="measured")

@@ -7,18 +7,31 @@ import argparse
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "identify", help="fit machine parameters to a measured open-loop FRF",
+        "identify",
+        help="fit machine parameters to a measured open-loop FRF",
         description="Grey-box identification (paper section 3.1): fit masses, stiffnesses "
         "and dampings to an open-loop FRF (DAC volts -> sensor volts) in a CSV "
         "'frequency_hz,real,imag'. Reports MATLAB's fit percent and writes "
-        "fitted-machine.toml.")
+        "fitted-machine.toml.",
+    )
     p.add_argument("frf", metavar="FRF.csv", help="measured FRF (Hz, V/V)")
-    p.add_argument("--machine", metavar="FILE", help="starting machine (default seed-prototype)")
-    p.add_argument("--param", metavar="KEY", action="append",
-                   help="dotted parameter to fit, SI (repeatable; default m1 m2 k1 c1 k2 c2)")
-    p.add_argument("--analogue", action="store_true",
-                   help="the sweep bypassed the DSP (no ZOH and delay in the model)")
-    p.add_argument("--out", metavar="DIR", default="results/identify", help="output directory")
+    p.add_argument(
+        "--machine", metavar="FILE", help="starting machine (default seed-prototype)"
+    )
+    p.add_argument(
+        "--param",
+        metavar="KEY",
+        action="append",
+        help="dotted parameter to fit, SI (repeatable; default m1 m2 k1 c1 k2 c2)",
+    )
+    p.add_argument(
+        "--analogue",
+        action="store_true",
+        help="the sweep bypassed the DSP (no ZOH and delay in the model)",
+    )
+    p.add_argument(
+        "--out", metavar="DIR", default="results/identify", help="output directory"
+    )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     return p
 
@@ -27,7 +40,13 @@ def run(args) -> int:
     import numpy as np
 
     from .._progress import stage
-    from ..servo import DEFAULT_IDENT_PARAMS, identify, load_machine, open_loop_frf, read_frf_csv
+    from ..servo import (
+        DEFAULT_IDENT_PARAMS,
+        identify,
+        load_machine,
+        open_loop_frf,
+        read_frf_csv,
+    )
     from ..viz._common import figure, save
     from ._common import atomic_write, out_dir, print_json, write_json
 
@@ -37,13 +56,18 @@ def run(args) -> int:
     with stage("grey-box fit"):
         res = identify(machine, f, y, params=params, digital=not args.analogue)
     out = out_dir(args.out)
-    text = res.machine.to_toml(header=f"fitted by servosurf identify to {args.frf}\n"
-                               f"fit {res.fit_percent_after:.2f} % (before "
-                               f"{res.fit_percent_before:.2f} %)")
+    text = res.machine.to_toml(
+        header=f"fitted by servosurf identify to {args.frf}\n"
+        f"fit {res.fit_percent_after:.2f} % (before "
+        f"{res.fit_percent_before:.2f} %)"
+    )
     atomic_write(out / "fitted-machine.toml", lambda p: p.write_text(text))
     fig, ax = figure(2, 1, figsize=(8, 6), sharex=True)
-    for lab, m, st in (("measured", None, "k."), ("before", machine, "C0--"),
-                       ("after", res.machine, "C3-")):
+    for lab, m, st in (
+        ("measured", None, "k."),
+        ("before", machine, "C0--"),
+        ("after", res.machine, "C3-"),
+    ):
         h = y if m is None else open_loop_frf(m, f, digital=not args.analogue)
         ax[0].loglog(f, np.abs(h), st, ms=2, label=lab)
         ax[1].semilogx(f, np.degrees(np.angle(h)), st, ms=2)
@@ -51,12 +75,17 @@ def run(args) -> int:
     ax[1].set_ylabel("phase [deg]")
     ax[1].set_xlabel("frequency [Hz]")
     ax[0].legend()
-    ax[0].set_title(f"fit {res.fit_percent_before:.1f} % -> {res.fit_percent_after:.1f} %")
+    ax[0].set_title(
+        f"fit {res.fit_percent_before:.1f} % -> {res.fit_percent_after:.1f} %"
+    )
     save(fig, out / "identify.png")
-    summary = {"parameters": res.parameters, "initial": res.initial,
-               "fit_percent_before": res.fit_percent_before,
-               "fit_percent_after": res.fit_percent_after,
-               "fitted_machine": str(out / "fitted-machine.toml")}
+    summary = {
+        "parameters": res.parameters,
+        "initial": res.initial,
+        "fit_percent_before": res.fit_percent_before,
+        "fit_percent_after": res.fit_percent_after,
+        "fitted_machine": str(out / "fitted-machine.toml"),
+    }
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)

@@ -6,11 +6,17 @@ import argparse
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("machines", help="list built-in machines; --describe documents keys",
-                       description="List built-in machine definitions (TOML). "
-                       "Pass one to other commands with --machine NAME or FILE.toml.")
-    p.add_argument("--describe", action="store_true",
-                   help="print every machine-file key with its SI unit and source")
+    p = sub.add_parser(
+        "machines",
+        help="list built-in machines; --describe documents keys",
+        description="List built-in machine definitions (TOML). "
+        "Pass one to other commands with --machine NAME or FILE.toml.",
+    )
+    p.add_argument(
+        "--describe",
+        action="store_true",
+        help="print every machine-file key with its SI unit and source",
+    )
     p.add_argument("--show", metavar="NAME", help="print a built-in machine file")
     p.add_argument("--json", action="store_true", help="JSON output on stdout")
     return p
@@ -25,7 +31,9 @@ def run(args) -> int:
         if args.show not in builtins:
             from ..errors import ConfigError
 
-            raise ConfigError(f"no built-in machine {args.show!r}; have: {', '.join(builtins)}")
+            raise ConfigError(
+                f"no built-in machine {args.show!r}; have: {', '.join(builtins)}"
+            )
         print(builtins[args.show].read_text(), end="")
         return 0
     if args.describe:
@@ -34,20 +42,30 @@ def run(args) -> int:
             print_json({"keys": rows})
         else:
             for r in rows:
-                print(f"{r['key']:<45} [{r['unit'] or '-'}] {r['doc']}"
-                      + (f"  (source: {r['source']})" if r["source"] else ""))
+                print(
+                    f"{r['key']:<45} [{r['unit'] or '-'}] {r['doc']}"
+                    + (f"  (source: {r['source']})" if r["source"] else "")
+                )
         return 0
     out = []
     for name, path in builtins.items():
         m = load_machine(name)
-        out.append({"name": name, "path": str(path), "description": m.description,
-                    "moving_mass_kg": m.mechanics.moving_mass,
-                    "disturbance_calibrations": [m.disturbances.name]
-                    + [d.name for d in m.alternative_disturbances]})
+        out.append(
+            {
+                "name": name,
+                "path": str(path),
+                "description": m.description,
+                "moving_mass_kg": m.mechanics.moving_mass,
+                "disturbance_calibrations": [m.disturbances.name]
+                + [d.name for d in m.alternative_disturbances],
+            }
+        )
     if args.json:
         print_json({"machines": out})
     else:
         for m in out:
-            print(f"{m['name']}: {m['description']} (moving mass {m['moving_mass_kg']:g} kg; "
-                  f"disturbances: {', '.join(m['disturbance_calibrations'])})")
+            print(
+                f"{m['name']}: {m['description']} (moving mass {m['moving_mass_kg']:g} kg; "
+                f"disturbances: {', '.join(m['disturbance_calibrations'])})"
+            )
     return 0

@@ -7,25 +7,53 @@ import argparse
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "noise", help="positioning-error study: FRFs, CAS, RMS vs bandwidth, spectra",
+        "noise",
+        help="positioning-error study: FRFs, CAS, RMS vs bandwidth, spectra",
         description="Synthesise real and following positioning errors from the disturbance "
         "PSDs (seed paper Eqs 8-12) for one or more moving masses; write PNG figures and a "
-        "JSON summary. Bandwidths are open-loop crossover frequencies.")
-    p.add_argument("--machine", metavar="FILE", help="machine TOML or built-in name "
-                   "(default: seed-prototype)")
-    p.add_argument("--mass", metavar="KG", type=float, action="append",
-                   help="moving mass m1+m2 in kg (repeatable; default 0.075 and 0.175)")
-    p.add_argument("--bandwidth", metavar="HZ", type=float,
-                   help="crossover bandwidth in Hz for FRFs, CAS and spectra "
-                   "(default: the machine's)")
-    p.add_argument("--bandwidths", metavar="HZ", type=float, nargs="+",
-                   help="bandwidth grid in Hz for the RMS-vs-bandwidth study "
-                   "(default 200..1800 Hz)")
-    p.add_argument("--disturbances", metavar="NAME",
-                   help="disturbance calibration name (see `servosurf machines`)")
-    p.add_argument("--out", metavar="DIR", default="results/noise",
-                   help="output directory (default results/noise)")
-    p.add_argument("--json", action="store_true", help="print the JSON summary on stdout")
+        "JSON summary. Bandwidths are open-loop crossover frequencies.",
+    )
+    p.add_argument(
+        "--machine",
+        metavar="FILE",
+        help="machine TOML or built-in name (default: seed-prototype)",
+    )
+    p.add_argument(
+        "--mass",
+        metavar="KG",
+        type=float,
+        action="append",
+        help="moving mass m1+m2 in kg (repeatable; default 0.075 and 0.175)",
+    )
+    p.add_argument(
+        "--bandwidth",
+        metavar="HZ",
+        type=float,
+        help="crossover bandwidth in Hz for FRFs, CAS and spectra "
+        "(default: the machine's)",
+    )
+    p.add_argument(
+        "--bandwidths",
+        metavar="HZ",
+        type=float,
+        nargs="+",
+        help="bandwidth grid in Hz for the RMS-vs-bandwidth study "
+        "(default 200..1800 Hz)",
+    )
+    p.add_argument(
+        "--disturbances",
+        metavar="NAME",
+        help="disturbance calibration name (see `servosurf machines`)",
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        default="results/noise",
+        help="output directory (default results/noise)",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="print the JSON summary on stdout"
+    )
     return p
 
 
@@ -55,9 +83,13 @@ def run(args) -> int:
     out = out_dir(args.out)
     fs = machine.controller.sample_rate
     freq = frequency_grid(fs)
-    summary: dict = {"machine": machine.name, "disturbances": machine.disturbances.name,
-                     "bandwidth_hz": bw, "bandwidth_definition": "open-loop crossover",
-                     "masses": []}
+    summary: dict = {
+        "machine": machine.name,
+        "disturbances": machine.disturbances.name,
+        "bandwidth_hz": bw,
+        "bandwidth_definition": "open-loop crossover",
+        "masses": [],
+    }
     frfs, budgets = {}, {}
     with stage(f"closed loops at {bw:g} Hz"):
         for m in masses:
@@ -65,18 +97,32 @@ def run(args) -> int:
             loop = ServoLoop(mm)
             stable = loop.is_stable()
             label = f"{m:g} kg"
-            entry = {"mass_kg": m, "stable": stable, "margins": loop.margins(),
-                     "pidf": {"kp": loop.pidf.kp, "ki_per_s": loop.pidf.ki,
-                              "kd_s": loop.pidf.kd, "tf_s": loop.pidf.tf}}
+            entry = {
+                "mass_kg": m,
+                "stable": stable,
+                "margins": loop.margins(),
+                "pidf": {
+                    "kp": loop.pidf.kp,
+                    "ki_per_s": loop.pidf.ki,
+                    "kd_s": loop.pidf.kd,
+                    "tf_s": loop.pidf.tf,
+                },
+            }
             if stable:
                 frfs[label] = loop.frf(freq)
                 b = synthesize(loop, freq=freq)
                 budgets[label] = b
-                entry.update(rms_real_m=b.rms_real(), rms_following_m=b.rms_following(),
-                             power_shares=b.power_shares(), real_peaks_hz=b.peaks())
+                entry.update(
+                    rms_real_m=b.rms_real(),
+                    rms_following_m=b.rms_following(),
+                    power_shares=b.power_shares(),
+                    real_peaks_hz=b.peaks(),
+                )
             summary["masses"].append(entry)
     with stage("RMS against bandwidth (design study)"):
-        study = design_study(machine, masses, grid, progress=lambda it: bar(it, desc="masses"))
+        study = design_study(
+            machine, masses, grid, progress=lambda it: bar(it, desc="masses")
+        )
     summary["study"] = study.to_dict()
     shares_bw = {"sensor_noise": [], "current_noise": [], "base_vibration": []}
     with stage("power shares against bandwidth"):
@@ -90,19 +136,31 @@ def run(args) -> int:
             sh = synthesize(loop, freq=freq).power_shares() if ok else None
             for k in shares_bw:
                 shares_bw[k].append(sh[k] if sh else float("nan"))
-    summary["power_shares_vs_bandwidth"] = {"mass_kg": masses[-1], "bandwidths_hz": grid,
-                                            **shares_bw}
+    summary["power_shares_vs_bandwidth"] = {
+        "mass_kg": masses[-1],
+        "bandwidths_hz": grid,
+        **shares_bw,
+    }
     with stage("figures"):
         figs = {}
         if frfs:
             figs["loop_bode"] = vz.plot_loop_bode(frfs, out / "loop_bode.png")
-            figs["disturbance_frfs"] = vz.plot_disturbance_frfs(frfs, out / "disturbance_frfs.png")
+            figs["disturbance_frfs"] = vz.plot_disturbance_frfs(
+                frfs, out / "disturbance_frfs.png"
+            )
             figs["cas"] = vz.plot_cas(budgets, out / "cas.png")
-            figs["error_spectra"] = vz.plot_error_spectra(budgets, out / "error_spectra.png")
-        figs["rms_vs_bandwidth"] = vz.plot_rms_vs_bandwidth(study, out / "rms_vs_bandwidth.png")
+            figs["error_spectra"] = vz.plot_error_spectra(
+                budgets, out / "error_spectra.png"
+            )
+        figs["rms_vs_bandwidth"] = vz.plot_rms_vs_bandwidth(
+            study, out / "rms_vs_bandwidth.png"
+        )
         figs["power_shares"] = vz.plot_power_shares(
-            grid, shares_bw, out / "power_shares.png",
-            title=f"Real-error power share per source, {masses[-1]:g} kg (cf. Fig. 15)")
+            grid,
+            shares_bw,
+            out / "power_shares.png",
+            title=f"Real-error power share per source, {masses[-1]:g} kg (cf. Fig. 15)",
+        )
         summary["figures"] = {k: str(v) for k, v in figs.items()}
     write_json(out / "summary.json", summary)
     if args.json:

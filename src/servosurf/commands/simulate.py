@@ -9,34 +9,72 @@ FORMATS = ("datx", "dat", "x3p", "xyz", "npz")
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "simulate", help="simulate the surface an FTS cuts (height map, figures, summary)",
+        "simulate",
+        help="simulate the surface an FTS cuts (height map, figures, summary)",
         description="Sweep the round-nose tool along the toolpath with the servo tracking, "
         "cutting-force and vibration deviations; write the height map, summary.json and "
-        "PNG figures. Bandwidths are open-loop crossover frequencies.")
+        "PNG figures. Bandwidths are open-loop crossover frequencies.",
+    )
     p.add_argument("toolpath", metavar="TOOLPATH.toml", help="toolpath definition")
-    p.add_argument("--workpiece", metavar="W.toml",
-                   help="workpiece/material definition (default: electroless NiP, flat)")
+    p.add_argument(
+        "--workpiece",
+        metavar="W.toml",
+        help="workpiece/material definition (default: electroless NiP, flat)",
+    )
     p.add_argument("--machine", metavar="M.toml", help="machine TOML or built-in name")
-    p.add_argument("--bandwidth", metavar="HZ", type=float,
-                   help="crossover bandwidth in Hz (default 1448 Hz, the paper's cutting set-up)")
-    p.add_argument("--mass", metavar="KG", type=float,
-                   help="moving mass m1+m2 in kg (default 0.175 kg, the paper's cutting set-up)")
-    p.add_argument("--seed", metavar="N", type=int, default=0,
-                   help="seed of the vibration realisation and instrument noise (default 0)")
-    p.add_argument("--parts", metavar="PART", nargs="+",
-                   choices=("tracking", "force", "vibration"),
-                   default=["tracking", "force", "vibration"],
-                   help="deviation parts to include (default: all)")
-    p.add_argument("--instrument", metavar="NAME", default=None,
-                   help="interferometer model to apply, e.g. newview-20x (default: none)")
-    p.add_argument("--format", choices=FORMATS, default=None,
-                   help="height-map file format (default datx; npz when the file-format "
-                   "writers are unavailable)")
-    p.add_argument("--mesh", metavar="EXT", choices=("stl", "ply"),
-                   help="also write a triangle mesh of the map (m)")
+    p.add_argument(
+        "--bandwidth",
+        metavar="HZ",
+        type=float,
+        help="crossover bandwidth in Hz (default 1448 Hz, the paper's cutting set-up)",
+    )
+    p.add_argument(
+        "--mass",
+        metavar="KG",
+        type=float,
+        help="moving mass m1+m2 in kg (default 0.175 kg, the paper's cutting set-up)",
+    )
+    p.add_argument(
+        "--seed",
+        metavar="N",
+        type=int,
+        default=0,
+        help="seed of the vibration realisation and instrument noise (default 0)",
+    )
+    p.add_argument(
+        "--parts",
+        metavar="PART",
+        nargs="+",
+        choices=("tracking", "force", "vibration"),
+        default=["tracking", "force", "vibration"],
+        help="deviation parts to include (default: all)",
+    )
+    p.add_argument(
+        "--instrument",
+        metavar="NAME",
+        default=None,
+        help="interferometer model to apply, e.g. newview-20x (default: none)",
+    )
+    p.add_argument(
+        "--format",
+        choices=FORMATS,
+        default=None,
+        help="height-map file format (default datx; npz when the file-format "
+        "writers are unavailable)",
+    )
+    p.add_argument(
+        "--mesh",
+        metavar="EXT",
+        choices=("stl", "ply"),
+        help="also write a triangle mesh of the map (m)",
+    )
     p.add_argument("--no-render", action="store_true", help="skip the 3-D render PNG")
-    p.add_argument("--out", metavar="DIR", default=None,
-                   help="output directory (default results/<toolpath name>)")
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        default=None,
+        help="output directory (default results/<toolpath name>)",
+    )
     p.add_argument("--json", action="store_true", help="print summary.json on stdout")
     return p
 
@@ -49,11 +87,19 @@ def _write_map(surface, path, fmt):
     from ._common import atomic_write
 
     if fmt == "npz":
+
         def w(p):
             with open(p, "wb") as fh:
-                np.savez_compressed(fh, z=surface.z, dx=surface.dx, dy=surface.dy,
-                                    x0=surface.x0, y0=surface.y0,
-                                    metadata=json.dumps(surface.metadata, default=float))
+                np.savez_compressed(
+                    fh,
+                    z=surface.z,
+                    dx=surface.dx,
+                    dy=surface.dy,
+                    x0=surface.x0,
+                    y0=surface.y0,
+                    metadata=json.dumps(surface.metadata, default=float),
+                )
+
         return atomic_write(path, w)
     from ..io import write_surface
 
@@ -73,8 +119,12 @@ def run(args) -> int:
     from ..viz import _surface_plots as sp
     from ._common import out_dir, print_json, write_json
 
-    if args.bandwidth is not None and not (np.isfinite(args.bandwidth) and args.bandwidth > 0):
-        raise ConfigError(f"--bandwidth must be a positive frequency in Hz, got {args.bandwidth!r}")
+    if args.bandwidth is not None and not (
+        np.isfinite(args.bandwidth) and args.bandwidth > 0
+    ):
+        raise ConfigError(
+            f"--bandwidth must be a positive frequency in Hz, got {args.bandwidth!r}"
+        )
     if args.mass is not None and not (np.isfinite(args.mass) and args.mass > 0):
         raise ConfigError(f"--mass must be a positive mass in kg, got {args.mass!r}")
     if args.seed < 0:
@@ -91,10 +141,16 @@ def run(args) -> int:
         except ImportError:
             fmt = "npz"
     out = out_dir(args.out or Path("results") / tp.stem)
-    res = simulate(tp, machine=args.machine, workpiece=args.workpiece,
-                   bandwidth=1448.0 if args.bandwidth is None else args.bandwidth,
-                   mass=0.175 if args.mass is None else args.mass, seed=args.seed,
-                   parts=tuple(args.parts), instrument=args.instrument)
+    res = simulate(
+        tp,
+        machine=args.machine,
+        workpiece=args.workpiece,
+        bandwidth=1448.0 if args.bandwidth is None else args.bandwidth,
+        mass=0.175 if args.mass is None else args.mass,
+        seed=args.seed,
+        parts=tuple(args.parts),
+        instrument=args.instrument,
+    )
     with stage("analysis"):
         summary = analyse(res)
     plots = summary.pop("_plots")
@@ -102,34 +158,52 @@ def run(args) -> int:
     files = {}
     with stage("writing map and figures"):
         files["map"] = str(_write_map(surf, out / f"surface.{fmt}", fmt))
-        files["map_png"] = str(sp.plot_map(surf, out / "map.png",
-                                           title=f"{tp.stem}: simulated height map"))
-        files["highpass_png"] = str(sp.plot_map(
-            plots["highpass"], out / "highpass.png",
-            title="80 mm^-1 high-pass" + (" of the form error" if "profile" in plots else "")))
+        files["map_png"] = str(
+            sp.plot_map(surf, out / "map.png", title=f"{tp.stem}: simulated height map")
+        )
+        files["highpass_png"] = str(
+            sp.plot_map(
+                plots["highpass"],
+                out / "highpass.png",
+                title="80 mm^-1 high-pass"
+                + (" of the form error" if "profile" in plots else ""),
+            )
+        )
         freq, psd, peaks = plots["spectrum"]
         speed = summary.get("surface_speed_m_per_s")
-        files["spectrum_png"] = str(sp.plot_spectrum(freq, psd, peaks, out / "spectrum.png",
-                                                     speed=speed))
+        files["spectrum_png"] = str(
+            sp.plot_spectrum(freq, psd, peaks, out / "spectrum.png", speed=speed)
+        )
         if "profile" in plots:
             y, z, fe = plots["profile"]
-            files["profile_png"] = str(sp.plot_profile_with_form_error(
-                y, z, fe["reference"], fe["error"], out / "profile.png"))
+            files["profile_png"] = str(
+                sp.plot_profile_with_form_error(
+                    y, z, fe["reference"], fe["error"], out / "profile.png"
+                )
+            )
         _plot_deviation(res, out / "deviation.png")
         files["deviation_png"] = str(out / "deviation.png")
         if not args.no_render:
             from ..viz._render import render_surface
 
-            files["render_png"] = str(render_surface(surf, out / "render.png",
-                                                     title=f"{tp.stem} (simulated)"))
+            files["render_png"] = str(
+                render_surface(surf, out / "render.png", title=f"{tp.stem} (simulated)")
+            )
         if args.mesh:
             from ..viz._mesh import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
-    summary.update(settings=res.settings, files=files, toolpath=str(tp),
-                   field={"nx": res.spec.field.nx, "ny": res.spec.field.ny,
-                          "pitch_x_m": res.spec.field.pitch_x,
-                          "pitch_y_m": res.spec.field.pitch_y})
+    summary.update(
+        settings=res.settings,
+        files=files,
+        toolpath=str(tp),
+        field={
+            "nx": res.spec.field.nx,
+            "ny": res.spec.field.ny,
+            "pitch_x_m": res.spec.field.pitch_x,
+            "pitch_y_m": res.spec.field.pitch_y,
+        },
+    )
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
@@ -152,8 +226,14 @@ def _plot_deviation(res, path):
     for name, dev in res.deviation.items():
         if np.any(dev[sl]):
             ax[1].plot(t, dev[sl] * 1e9, label=name, lw=0.8)
-    ax[1].plot(t, res.following_error[sl] * 1e9, "k", lw=0.5, alpha=0.6,
-               label="following error")
+    ax[1].plot(
+        t,
+        res.following_error[sl] * 1e9,
+        "k",
+        lw=0.5,
+        alpha=0.6,
+        label="following error",
+    )
     ax[1].set_ylabel("tool deviation [nm]")
     ax[1].set_xlabel("time [ms]")
     ax[1].legend(fontsize=7)

@@ -11,5 +11,13 @@ from ._force import (
     segment_area,
 )
 
-__all__ = ["DEFAULT_WORKPIECE", "ChipModel", "Material", "Precut", "Workpiece",
-           "facing_chip_area", "load_workpiece", "segment_area"]
+__all__ = [
+    "DEFAULT_WORKPIECE",
+    "ChipModel",
+    "Material",
+    "Precut",
+    "Workpiece",
+    "facing_chip_area",
+    "load_workpiece",
+    "segment_area",
+]

@@ -20,8 +20,16 @@ import numpy as np
 from ..config import from_mapping, load_toml, param
 from ..errors import ConfigError
 
-__all__ = ["Material", "Precut", "Workpiece", "load_workpiece", "ChipModel",
-           "segment_area", "facing_chip_area", "DEFAULT_WORKPIECE"]
+__all__ = [
+    "Material",
+    "Precut",
+    "Workpiece",
+    "load_workpiece",
+    "ChipModel",
+    "segment_area",
+    "facing_chip_area",
+    "DEFAULT_WORKPIECE",
+]
 
 #: Built-in default workpiece file name (in the repository's workpieces/ folder and
 #: mirrored in the defaults below).
@@ -34,11 +42,19 @@ class Material:
 
     name: str = param("Electroless plated NiP alloy", doc="material name")
     specific_thrust_pressure: float = param(
-        1.016e9, unit="Pa", low=0.0, doc="thrust force per uncut chip area, k_t",
-        source="calibrated to seed paper Fig. 17b (295 nm peak deviation)")
+        1.016e9,
+        unit="Pa",
+        low=0.0,
+        doc="thrust force per uncut chip area, k_t",
+        source="calibrated to seed paper Fig. 17b (295 nm peak deviation)",
+    )
     specific_cutting_pressure: float = param(
-        3.5e9, unit="Pa", low=0.0, doc="tangential force per uncut chip area",
-        source="assumed; reported only")
+        3.5e9,
+        unit="Pa",
+        low=0.0,
+        doc="tangential force per uncut chip area",
+        source="assumed; reported only",
+    )
     source: str = param("", doc="where the coefficients come from")
 
 
@@ -62,7 +78,9 @@ class Workpiece:
 
     def __post_init__(self) -> None:
         if self.precut.kind == "file" and not self.precut.file:
-            raise ConfigError("precut.file must name a height map when precut.kind = 'file'")
+            raise ConfigError(
+                "precut.file must name a height map when precut.kind = 'file'"
+            )
 
 
 def load_workpiece(source: str | Path | None = None) -> Workpiece:
@@ -79,7 +97,9 @@ def load_workpiece(source: str | Path | None = None) -> Workpiece:
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     if wp.precut.file and not Path(wp.precut.file).is_absolute():
-        pre = dataclasses.replace(wp.precut, file=str((path.parent / wp.precut.file).resolve()))
+        pre = dataclasses.replace(
+            wp.precut, file=str((path.parent / wp.precut.file).resolve())
+        )
         wp = dataclasses.replace(wp, precut=pre)
     return wp
 
@@ -91,10 +111,14 @@ def segment_area(radius: float, depth: np.ndarray | float) -> np.ndarray:
     """
     d = np.clip(np.asarray(depth, dtype=float), 0.0, radius)
     h = radius - d
-    return radius**2 * np.arccos(h / radius) - h * np.sqrt(np.maximum(2 * radius * d - d * d, 0))
+    return radius**2 * np.arccos(h / radius) - h * np.sqrt(
+        np.maximum(2 * radius * d - d * d, 0)
+    )
 
 
-def facing_chip_area(radius: float, feed: float, depth: float, *, n: int = 20001) -> float:
+def facing_chip_area(
+    radius: float, feed: float, depth: float, *, n: int = 20001
+) -> float:
     """Steady-state uncut chip section (m^2) in face turning.
 
     The region between the current tool arc (tip at ``-depth``) and the surface left
@@ -132,7 +156,9 @@ class ChipModel:
 
     def force(self, z_tool: np.ndarray) -> np.ndarray:
         """Thrust force in N for tool-tip heights ``z_tool`` (m)."""
-        return self.thrust_pressure * segment_area(self.tool_radius, self.top - np.asarray(z_tool))
+        return self.thrust_pressure * segment_area(
+            self.tool_radius, self.top - np.asarray(z_tool)
+        )
 
     def kernel_args(self) -> tuple[int, np.ndarray]:
         """Arguments of the numba loop kernel (kind 1: plunge into a flat top)."""

@@ -30,12 +30,31 @@ def _segment_area(radius, depth):
         depth = radius
     h = radius - depth
     return radius * radius * math.acos(h / radius) - h * math.sqrt(
-        max(2.0 * radius * depth - depth * depth, 0.0))
+        max(2.0 * radius * depth - depth * depth, 0.0)
+    )
 
 
 @njit(cache=_CACHE, fastmath=_FASTMATH)
-def _closed_loop_sim(ad, bd, cy, ac, bc, cc, dc, sens, nd, frac, r, f, i_n, s_n,
-                     z_off, chip_kind, chip_par, out):
+def _closed_loop_sim(
+    ad,
+    bd,
+    cy,
+    ac,
+    bc,
+    cc,
+    dc,
+    sens,
+    nd,
+    frac,
+    r,
+    f,
+    i_n,
+    s_n,
+    z_off,
+    chip_kind,
+    chip_par,
+    out,
+):
     """Simulate the discrete closed loop; fills ``out`` (5, n).
 
     Parameters
@@ -100,7 +119,9 @@ def _closed_loop_sim(ad, bd, cy, ac, bc, cc, dc, sens, nd, frac, r, f, i_n, s_n,
             u_app += frac * reg[nd + 1]
         force = f[k]
         if chip_kind == 1:
-            force += chip_par[0] * _segment_area(chip_par[1], chip_par[2] - x1 - z_off[k])
+            force += chip_par[0] * _segment_area(
+                chip_par[1], chip_par[2] - x1 - z_off[k]
+            )
         for i in range(na):
             acc = bd[i, 0] * u_app + bd[i, 1] * i_n[k] + bd[i, 2] * force
             for j in range(na):

@@ -5,6 +5,7 @@ lengths are in m and spatial frequencies in 1/m.
 """
 
 from ._filters import gaussian_filter_1d, gaussian_filter_2d, high_pass
+from ._interferometer import INSTRUMENTS, Interferometer, load_instrument, measure
 from ._form import (
     form_error_profile,
     lenslet_centre_profile,
@@ -43,4 +44,9 @@ __all__ = [
     "shift_surface",
     "resample",
     "remove_form",
+    # interferometer model
+    "Interferometer",
+    "INSTRUMENTS",
+    "load_instrument",
+    "measure",
 ]

@@ -10,13 +10,34 @@ from ._psd import (
     write_psd_csv,
 )
 from ._stream import BLOCK, VibrationStream
-from ._study import DesignStudy, design_study, optimal_bandwidth, rms_at, stability_limit
+from ._study import (
+    DesignStudy,
+    design_study,
+    optimal_bandwidth,
+    rms_at,
+    stability_limit,
+)
 from ._synthesis import SOURCES, ErrorBudget, Realisation, cas, realise, synthesize
 
 __all__ = [
-    "PAPER_RECORD_LENGTH", "PAPER_RECORDS", "evaluate_psd", "frequency_grid",
-    "read_psd_csv", "welch_psd", "write_psd_csv",
-    "BLOCK", "VibrationStream",
-    "DesignStudy", "design_study", "optimal_bandwidth", "rms_at", "stability_limit",
-    "SOURCES", "ErrorBudget", "Realisation", "cas", "realise", "synthesize",
+    "PAPER_RECORD_LENGTH",
+    "PAPER_RECORDS",
+    "evaluate_psd",
+    "frequency_grid",
+    "read_psd_csv",
+    "welch_psd",
+    "write_psd_csv",
+    "BLOCK",
+    "VibrationStream",
+    "DesignStudy",
+    "design_study",
+    "optimal_bandwidth",
+    "rms_at",
+    "stability_limit",
+    "SOURCES",
+    "ErrorBudget",
+    "Realisation",
+    "cas",
+    "realise",
+    "synthesize",
 ]

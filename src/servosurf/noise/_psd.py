@@ -29,7 +29,9 @@ PAPER_RECORD_LENGTH = 4096
 PAPER_RECORDS = 32
 
 
-def frequency_grid(fs: float, *, fmin: float | None = None, n: int = 4000) -> np.ndarray:
+def frequency_grid(
+    fs: float, *, fmin: float | None = None, n: int = 4000
+) -> np.ndarray:
     """Geometric frequency grid from ``fmin`` to just below Nyquist, in Hz.
 
     Parameters
@@ -49,7 +51,9 @@ def frequency_grid(fs: float, *, fmin: float | None = None, n: int = 4000) -> np
         Frequencies in Hz.
     """
     fs = check_positive(fs, name="fs")
-    fmin = fs / PAPER_RECORD_LENGTH if fmin is None else check_positive(fmin, name="fmin")
+    fmin = (
+        fs / PAPER_RECORD_LENGTH if fmin is None else check_positive(fmin, name="fmin")
+    )
     if fmin >= fs / 2:
         raise ConfigError(f"fmin must be below Nyquist ({fs / 2:g} Hz), got {fmin:g}")
     return np.geomspace(fmin, fs / 2, n)
@@ -80,14 +84,18 @@ def read_psd_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
     if not rows or [c.strip().lower() for c in rows[0][:2]] != ["frequency_hz", "psd"]:
         raise ConfigError(f"{name}: expected a header 'frequency_hz,psd'")
     try:
-        data = np.array([[float(r[0]), float(r[1])] for r in rows[1:] if r], dtype=float)
+        data = np.array(
+            [[float(r[0]), float(r[1])] for r in rows[1:] if r], dtype=float
+        )
     except (ValueError, IndexError):
         raise ConfigError(f"{name}: every row must hold two numbers") from None
     if data.shape[0] < 2:
         raise ConfigError(f"{name}: need at least 2 rows of data, got {data.shape[0]}")
     f, p = data[:, 0], data[:, 1]
     if not (np.all(np.isfinite(data)) and np.all(np.diff(f) > 0) and f[0] > 0):
-        raise ConfigError(f"{name}: frequencies must be positive, finite and increasing")
+        raise ConfigError(
+            f"{name}: frequencies must be positive, finite and increasing"
+        )
     if np.any(p < 0):
         raise ConfigError(f"{name}: PSD values must be >= 0")
     return f, p
@@ -97,7 +105,9 @@ def write_psd_csv(path: str | Path, freq: np.ndarray, psd: np.ndarray) -> None:
     """Write ``frequency_hz,psd`` CSV (Hz, unit^2/Hz) atomically."""
     from ..commands._common import atomic_write
 
-    lines = ["frequency_hz,psd"] + [f"{f:.9g},{p:.9g}" for f, p in zip(freq, psd, strict=True)]
+    lines = ["frequency_hz,psd"] + [
+        f"{f:.9g},{p:.9g}" for f, p in zip(freq, psd, strict=True)
+    ]
     atomic_write(path, lambda p: p.write_text("\n".join(lines) + "\n"))
 
 
@@ -162,12 +172,29 @@ def welch_psd(
     a = check_array(x, name="x", finite=True)
     if a.ndim == 1:
         if a.size < nperseg:
-            raise ConfigError(f"x has {a.size} samples, need at least nperseg={nperseg}")
-        f, p = sp.signal.welch(a, fs=fs, window=window, nperseg=nperseg, noverlap=0,
-                               detrend="constant", scaling="density")
+            raise ConfigError(
+                f"x has {a.size} samples, need at least nperseg={nperseg}"
+            )
+        f, p = sp.signal.welch(
+            a,
+            fs=fs,
+            window=window,
+            nperseg=nperseg,
+            noverlap=0,
+            detrend="constant",
+            scaling="density",
+        )
     elif a.ndim == 2:
-        f, p = sp.signal.welch(a, fs=fs, window=window, nperseg=min(nperseg, a.shape[1]),
-                               noverlap=0, detrend="constant", scaling="density", axis=-1)
+        f, p = sp.signal.welch(
+            a,
+            fs=fs,
+            window=window,
+            nperseg=min(nperseg, a.shape[1]),
+            noverlap=0,
+            detrend="constant",
+            scaling="density",
+            axis=-1,
+        )
         p = p.mean(axis=0)
     else:
         raise ConfigError(f"x must be 1-D or 2-D, got shape {a.shape}")

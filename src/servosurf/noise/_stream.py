@@ -48,8 +48,9 @@ class VibrationStream:
     construction) but follow the same spectrum.
     """
 
-    def __init__(self, loop: ServoLoop, *, seed: int, taps: int = 32768,
-                 which: str = "real") -> None:
+    def __init__(
+        self, loop: ServoLoop, *, seed: int, taps: int = 32768, which: str = "real"
+    ) -> None:
         if not isinstance(seed, int | np.integer) or seed < 0:
             raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
         if taps < 64 or taps % 2:
@@ -72,9 +73,12 @@ class VibrationStream:
         self.rms = float(np.sqrt(np.sum(h**2)))
 
     def _white(self, b0: int, b1: int) -> np.ndarray:
-        return np.concatenate([
-            np.random.default_rng([self.seed, b]).standard_normal(BLOCK)
-            for b in range(b0, b1)])
+        return np.concatenate(
+            [
+                np.random.default_rng([self.seed, b]).standard_normal(BLOCK)
+                for b in range(b0, b1)
+            ]
+        )
 
     def segment(self, k0: int, n: int) -> np.ndarray:
         """Samples ``k0 .. k0 + n - 1`` of the series (m).
@@ -100,10 +104,12 @@ class VibrationStream:
         w0 = k0
         w1 = k0 + n + self.taps - 1
         b0, b1 = w0 // BLOCK, (w1 - 1) // BLOCK + 1
-        w = self._white(b0, b1)[w0 - b0 * BLOCK:w1 - b0 * BLOCK]
+        w = self._white(b0, b1)[w0 - b0 * BLOCK : w1 - b0 * BLOCK]
         return sp.signal.oaconvolve(w, self.h, mode="valid")
 
-    def to_memmap(self, path, n: int, *, chunk: int = 1 << 22, progress=None) -> np.memmap:
+    def to_memmap(
+        self, path, n: int, *, chunk: int = 1 << 22, progress=None
+    ) -> np.memmap:
         """Write samples ``0 .. n - 1`` to a float32 memory-mapped file (m).
 
         Parameters
@@ -117,12 +123,14 @@ class VibrationStream:
         progress : callable, optional
             Wraps the chunk iterable (progress bar).
         """
-        mm = np.lib.format.open_memmap(str(path), mode="w+", dtype=np.float32, shape=(n,))
+        mm = np.lib.format.open_memmap(
+            str(path), mode="w+", dtype=np.float32, shape=(n,)
+        )
         starts = range(0, n, chunk)
         if progress is not None:
             starts = progress(starts)
         for k in starts:
             m = min(chunk, n - k)
-            mm[k:k + m] = self.segment(k, m)
+            mm[k : k + m] = self.segment(k, m)
         mm.flush()
         return mm

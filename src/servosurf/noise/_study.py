@@ -13,12 +13,22 @@ from ..servo._machine import Disturbances, Machine
 from ._psd import frequency_grid
 from ._synthesis import synthesize
 
-__all__ = ["DesignStudy", "design_study", "stability_limit", "optimal_bandwidth",
-           "rms_at"]
+__all__ = [
+    "DesignStudy",
+    "design_study",
+    "stability_limit",
+    "optimal_bandwidth",
+    "rms_at",
+]
 
 
-def rms_at(machine: Machine, bandwidth: float, *, disturbances: Disturbances | None = None,
-           freq: np.ndarray | None = None) -> tuple[float, float, bool]:
+def rms_at(
+    machine: Machine,
+    bandwidth: float,
+    *,
+    disturbances: Disturbances | None = None,
+    freq: np.ndarray | None = None,
+) -> tuple[float, float, bool]:
     """RMS real and following error (m) at a crossover ``bandwidth`` (Hz).
 
     Returns ``(nan, nan, False)`` when the loop cannot be tuned or is unstable.
@@ -40,8 +50,9 @@ def _stable(machine: Machine, bandwidth: float) -> bool:
         return False
 
 
-def stability_limit(machine: Machine, *, fmin: float = 100.0, fmax: float = 20e3,
-                    rtol: float = 1e-3) -> float:
+def stability_limit(
+    machine: Machine, *, fmin: float = 100.0, fmax: float = 20e3, rtol: float = 1e-3
+) -> float:
     """Lowest crossover bandwidth (Hz) above ``fmin`` at which the tuned loop is unstable.
 
     Scans upward in 5 % steps, then bisects to ``rtol``. Returns ``inf`` when the
@@ -69,9 +80,15 @@ def stability_limit(machine: Machine, *, fmin: float = 100.0, fmax: float = 20e3
     return float(hi)
 
 
-def optimal_bandwidth(machine: Machine, *, which: str = "real", lo: float = 100.0,
-                      hi: float | None = None, disturbances: Disturbances | None = None,
-                      freq: np.ndarray | None = None) -> tuple[float, float]:
+def optimal_bandwidth(
+    machine: Machine,
+    *,
+    which: str = "real",
+    lo: float = 100.0,
+    hi: float | None = None,
+    disturbances: Disturbances | None = None,
+    freq: np.ndarray | None = None,
+) -> tuple[float, float]:
     """Crossover bandwidth (Hz) minimising the RMS ``"real"`` or ``"following"`` error.
 
     Returns
@@ -86,19 +103,23 @@ def optimal_bandwidth(machine: Machine, *, which: str = "real", lo: float = 100.
     if hi is None:
         hi = min(stability_limit(machine, fmin=lo), 20e3) * 0.999
     grid = np.geomspace(lo, hi, 24)
-    vals = np.array([rms_at(machine, b, disturbances=disturbances, freq=freq)[col]
-                     for b in grid])
+    vals = np.array(
+        [rms_at(machine, b, disturbances=disturbances, freq=freq)[col] for b in grid]
+    )
     if not np.any(np.isfinite(vals)):
         raise ModelError("no stable bandwidth in the search range")
     i = int(np.nanargmin(vals))
     a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
 
     def fun(lb: float) -> float:
-        v = rms_at(machine, float(np.exp(lb)), disturbances=disturbances, freq=freq)[col]
+        v = rms_at(machine, float(np.exp(lb)), disturbances=disturbances, freq=freq)[
+            col
+        ]
         return v if np.isfinite(v) else 1.0
 
-    res = sp.optimize.minimize_scalar(fun, bounds=(np.log(a), np.log(b)),
-                                      method="bounded", options={"xatol": 1e-3})
+    res = sp.optimize.minimize_scalar(
+        fun, bounds=(np.log(a), np.log(b)), method="bounded", options={"xatol": 1e-3}
+    )
     return float(np.exp(res.x)), float(res.fun)
 
 
@@ -133,16 +154,24 @@ class DesignStudy:
     def to_dict(self) -> dict:
         """JSON-ready dictionary (SI units, keys carry the unit)."""
         return {
-            "masses_kg": self.masses, "bandwidths_hz": self.bandwidths,
-            "rms_real_m": self.rms_real, "rms_following_m": self.rms_following,
+            "masses_kg": self.masses,
+            "bandwidths_hz": self.bandwidths,
+            "rms_real_m": self.rms_real,
+            "rms_following_m": self.rms_following,
             "optimal_bandwidth_hz": self.optimal_bandwidth,
             "optimal_rms_real_m": self.optimal_rms,
             "stability_limit_hz": self.stability_limit,
         }
 
 
-def design_study(machine: Machine, masses, bandwidths, *,
-                 disturbances: Disturbances | None = None, progress=None) -> DesignStudy:
+def design_study(
+    machine: Machine,
+    masses,
+    bandwidths,
+    *,
+    disturbances: Disturbances | None = None,
+    progress=None,
+) -> DesignStudy:
     """RMS real and following error against bandwidth for a list of moving masses.
 
     Parameters
@@ -180,8 +209,9 @@ def design_study(machine: Machine, masses, bandwidths, *,
             rr[i, j], rf[i, j], _ = rms_at(m, b, disturbances=disturbances, freq=freq)
         lim[i] = stability_limit(m)
         try:
-            opt[i], optv[i] = optimal_bandwidth(m, hi=0.999 * lim[i],
-                                                disturbances=disturbances, freq=freq)
+            opt[i], optv[i] = optimal_bandwidth(
+                m, hi=0.999 * lim[i], disturbances=disturbances, freq=freq
+            )
         except ModelError:
             pass
     return DesignStudy(masses, bws, rr, rf, opt, optv, lim)

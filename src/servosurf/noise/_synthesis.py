@@ -105,7 +105,9 @@ class ErrorBudget:
         tot = sum(p.values())
         return {k: (v / tot if tot > 0 else 0.0) for k, v in p.items()}
 
-    def peaks(self, *, fmin: float = 2000.0, n: int = 2, which: str = "real") -> list[float]:
+    def peaks(
+        self, *, fmin: float = 2000.0, n: int = 2, which: str = "real"
+    ) -> list[float]:
         """Frequencies (Hz) of the ``n`` most prominent peaks of the error PSD."""
         psd = self.real_total if which == "real" else self.following_total
         sel = self.freq >= fmin
@@ -115,8 +117,11 @@ class ErrorBudget:
         return sorted(float(f[i]) for i in idx[order])
 
 
-def synthesize(loop: ServoLoop, disturbances: Disturbances | None = None,
-               freq: np.ndarray | None = None) -> ErrorBudget:
+def synthesize(
+    loop: ServoLoop,
+    disturbances: Disturbances | None = None,
+    freq: np.ndarray | None = None,
+) -> ErrorBudget:
     """Synthesise the error PSDs of a closed loop from its disturbance PSDs.
 
     Parameters
@@ -172,8 +177,15 @@ class Realisation:
         return np.arange(self.tool.size) / self.fs
 
 
-def realise(loop: ServoLoop, n: int, *, seed: int, disturbances: Disturbances | None = None,
-            fmin: float | None = None, sources: bool = False) -> Realisation:
+def realise(
+    loop: ServoLoop,
+    n: int,
+    *,
+    seed: int,
+    disturbances: Disturbances | None = None,
+    fmin: float | None = None,
+    sources: bool = False,
+) -> Realisation:
     """Draw a seeded realisation of the real and following errors.
 
     Each disturbance is drawn as a Gaussian series with its PSD (random complex
@@ -245,5 +257,9 @@ def realise(loop: ServoLoop, n: int, *, seed: int, disturbances: Disturbances | 
             series[name] = sp.fft.irfft(x, m, workers=-1)[:n]
         tool[band] += path((inp, "tool")) * xb
         fol[band] += path((inp, "following_error")) * xb
-    return Realisation(fs=fs, tool=sp.fft.irfft(tool, m, workers=-1)[:n],
-                       following=sp.fft.irfft(fol, m, workers=-1)[:n], sources=series)
+    return Realisation(
+        fs=fs,
+        tool=sp.fft.irfft(tool, m, workers=-1)[:n],
+        following=sp.fft.irfft(fol, m, workers=-1)[:n],
+        sources=series,
+    )

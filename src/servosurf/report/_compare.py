@@ -20,8 +20,10 @@ def _common_grid(a: Surface, b: Surface) -> tuple[Surface, Surface]:
 
     for s, name in ((a, "measured"), (b, "simulated")):
         if not s.calibrated:
-            raise ConfigError(f"the {name} map is uncalibrated (no pixel size); "
-                              "compare needs lateral calibration")
+            raise ConfigError(
+                f"the {name} map is uncalibrated (no pixel size); "
+                "compare needs lateral calibration"
+            )
     dx, dy = max(a.dx, b.dx), max(a.dy, b.dy)
 
     def to(s: Surface) -> Surface:
@@ -39,10 +41,15 @@ def _crop_to(a: Surface, b: Surface) -> tuple[Surface, Surface]:
     return a.replace(z=a.z[:ny, :nx]), b.replace(z=b.z[:ny, :nx])
 
 
-def compare_surfaces(measured: Surface, simulated: Surface, *,
-                     remove: tuple[str, ...] = ("piston", "tilt"),
-                     axis: int = 0, register: bool = True,
-                     per_lenslet: bool = True) -> dict[str, Any]:
+def compare_surfaces(
+    measured: Surface,
+    simulated: Surface,
+    *,
+    remove: tuple[str, ...] = ("piston", "tilt"),
+    axis: int = 0,
+    register: bool = True,
+    per_lenslet: bool = True,
+) -> dict[str, Any]:
     """Bring two maps onto one grid, register them and report their difference.
 
     Parameters
@@ -65,7 +72,8 @@ def compare_surfaces(measured: Surface, simulated: Surface, *,
     dict
         ``shift_m`` ([dy, dx] applied to the simulated map, m), ``lenslet_shifts``,
         ``rms_residual_m``, ``pv_residual_m``, ``fit_percent`` (MATLAB-style
-        ``100 (1 - ||residual|| / ||measured - mean||)`` with the removed form terms), ``correlation``, ``peaks_measured``,
+        ``100 (1 - ||residual|| / ||measured - mean||)`` with the removed form
+        terms), ``correlation``, ``peaks_measured``,
         ``peaks_simulated`` and ``peaks_matched`` (1/m), plus arrays for plotting
         under ``_plots``.
     """
@@ -103,13 +111,19 @@ def compare_surfaces(measured: Surface, simulated: Surface, *,
                     ly, lx, _ = register_translation(sub_m, sub_s)
                 except (ConfigError, ValueError):
                     continue
-                lens_shifts.append({"centre_x_m": lens["centre_x_m"],
-                                    "centre_y_m": lens["centre_y_m"],
-                                    "shift_m": [float(ly), float(lx)]})
+                lens_shifts.append(
+                    {
+                        "centre_x_m": lens["centre_x_m"],
+                        "centre_y_m": lens["centre_y_m"],
+                        "shift_m": [float(ly), float(lx)],
+                    }
+                )
     both = np.isfinite(m.z) & np.isfinite(s.z)
     if both.sum() < 16:
-        raise ConfigError("the measured and simulated maps hardly overlap after "
-                          "registration (fewer than 16 common valid pixels)")
+        raise ConfigError(
+            "the measured and simulated maps hardly overlap after "
+            "registration (fewer than 16 common valid pixels)"
+        )
     res = m.replace(z=np.where(both, m.z - s.z, np.nan))
     if remove:
         res = remove_form(res, terms=tuple(remove))
@@ -118,16 +132,24 @@ def compare_surfaces(measured: Surface, simulated: Surface, *,
     # fit percent with the removed form terms: 1 - ||residual|| / ||m - mean(m)||
     rr = res.z[both]
     rr = rr[np.isfinite(rr)]
-    fit = float(100.0 * (1.0 - np.linalg.norm(rr) / np.linalg.norm(mv - mv.mean()))) \
-        if mv.std() > 0 else float("nan")
+    fit = (
+        float(100.0 * (1.0 - np.linalg.norm(rr) / np.linalg.norm(mv - mv.mean())))
+        if mv.std() > 0
+        else float("nan")
+    )
     # correlation of the form-corrected measurement (simulated + residual) with the
     # simulation, on the pixels where both are valid
     rz = res.z[both]
     ok = np.isfinite(rz)
-    corr = float(np.corrcoef(sv[ok] + rz[ok], sv[ok])[0, 1]) \
-        if sv[ok].std() > 0 else float("nan")
+    corr = (
+        float(np.corrcoef(sv[ok] + rz[ok], sv[ok])[0, 1])
+        if sv[ok].std() > 0
+        else float("nan")
+    )
     fm, pm = psd_1d(np.where(both, m.z, np.nan), m.dy if axis == 0 else m.dx, axis=axis)
-    fs_, ps = psd_1d(np.where(both, s.z, np.nan), s.dy if axis == 0 else s.dx, axis=axis)
+    fs_, ps = psd_1d(
+        np.where(both, s.z, np.nan), s.dy if axis == 0 else s.dx, axis=axis
+    )
     pk_m = [p["freq_per_m"] for p in find_peaks_spectrum(fm, pm, n=5)]
     pk_s = [p["freq_per_m"] for p in find_peaks_spectrum(fs_, ps, n=5)]
     matched = []
@@ -136,12 +158,23 @@ def compare_surfaces(measured: Surface, simulated: Surface, *,
         if best is not None and abs(best - a) <= PEAK_MATCH_RTOL * a:
             matched.append([a, best])
     return {
-        "pixel_m": [m.dy, m.dx], "shape": list(m.shape), "shift_m": list(shift),
-        "shift_px": [shift[0] / m.dy, shift[1] / m.dx], "lenslet_shifts": lens_shifts,
-        "removed": list(remove), "rms_residual_m": float(np.sqrt(np.mean((r - r.mean()) ** 2))),
-        "pv_residual_m": float(r.max() - r.min()), "fit_percent": fit, "correlation": corr,
-        "peaks_measured_per_m": pk_m, "peaks_simulated_per_m": pk_s,
+        "pixel_m": [m.dy, m.dx],
+        "shape": list(m.shape),
+        "shift_m": list(shift),
+        "shift_px": [shift[0] / m.dy, shift[1] / m.dx],
+        "lenslet_shifts": lens_shifts,
+        "removed": list(remove),
+        "rms_residual_m": float(np.sqrt(np.mean((r - r.mean()) ** 2))),
+        "pv_residual_m": float(r.max() - r.min()),
+        "fit_percent": fit,
+        "correlation": corr,
+        "peaks_measured_per_m": pk_m,
+        "peaks_simulated_per_m": pk_s,
         "peaks_matched_per_m": matched,
-        "_plots": {"measured": m, "simulated": s, "residual": res,
-                   "spectra": (fm, pm, fs_, ps)},
+        "_plots": {
+            "measured": m,
+            "simulated": s,
+            "residual": res,
+            "spectra": (fm, pm, fs_, ps),
+        },
     }

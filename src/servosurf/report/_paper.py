@@ -45,28 +45,39 @@ GROUPS: dict[str, Callable[[dict], tuple[list[Row], list[str]]]] = {}
 
 def row_group(name: str):
     """Register a function producing rows for the paper table."""
+
     def deco(fn):
         GROUPS[name] = fn
         return fn
+
     return deco
 
 
-def rel_row(quantity: str, paper: float, value: float, unit: str, rtol: float,
-            setup: str = "") -> Row:
+def rel_row(
+    quantity: str, paper: float, value: float, unit: str, rtol: float, setup: str = ""
+) -> Row:
     """A row checked to a relative tolerance."""
     ok = bool(np.isfinite(value) and abs(value - paper) <= rtol * abs(paper))
     return Row(quantity, paper, float(value), unit, f"{rtol * 100:g}%", ok, setup)
 
 
-def abs_row(quantity: str, paper: float, value: float, unit: str, atol: float,
-            setup: str = "") -> Row:
+def abs_row(
+    quantity: str, paper: float, value: float, unit: str, atol: float, setup: str = ""
+) -> Row:
     """A row checked to an absolute tolerance."""
     ok = bool(np.isfinite(value) and abs(value - paper) <= atol)
     return Row(quantity, paper, float(value), unit, f"+-{atol:g} {unit}", ok, setup)
 
 
-def range_row(quantity: str, paper: float, value: float, unit: str, lo: float, hi: float,
-              setup: str = "") -> Row:
+def range_row(
+    quantity: str,
+    paper: float,
+    value: float,
+    unit: str,
+    lo: float,
+    hi: float,
+    setup: str = "",
+) -> Row:
     """A row checked to lie in ``[lo, hi]``."""
     ok = bool(np.isfinite(value) and lo <= value <= hi)
     return Row(quantity, paper, float(value), unit, f"{lo:g}..{hi:g} {unit}", ok, setup)
@@ -87,22 +98,52 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     sb = "disturbances section-5.2 (fitted to Figs 12-14)"
     for mass, paper in ((0.075, 874.0), (0.175, 468.0)):
         bw, _ = optimal_bandwidth(a.with_moving_mass(mass))
-        rows.append(rel_row(f"optimal bandwidth (real error), {mass} kg", paper, bw, "Hz",
-                            0.15, sa))
+        rows.append(
+            rel_row(
+                f"optimal bandwidth (real error), {mass} kg", paper, bw, "Hz", 0.15, sa
+            )
+        )
     for mass, paper in ((0.075, 874.0), (0.175, 468.0)):
         bw, _ = optimal_bandwidth(b.with_moving_mass(mass), which="following")
-        rows.append(rel_row(f"optimal bandwidth (following error), {mass} kg", paper, bw,
-                            "Hz", 0.15, sb))
+        rows.append(
+            rel_row(
+                f"optimal bandwidth (following error), {mass} kg",
+                paper,
+                bw,
+                "Hz",
+                0.15,
+                sb,
+            )
+        )
     for mass, paper in ((0.075, 0.182e-9), (0.175, 0.155e-9)):
         loop = ServoLoop(a.with_moving_mass(mass).with_bandwidth(468.0))
-        rows.append(rel_row(f"RMS real error at 468 Hz, {mass} kg", paper,
-                            synthesize(loop).rms_real(), "m", 0.15, sa))
+        rows.append(
+            rel_row(
+                f"RMS real error at 468 Hz, {mass} kg",
+                paper,
+                synthesize(loop).rms_real(),
+                "m",
+                0.15,
+                sa,
+            )
+        )
     loop = ServoLoop(b.with_moving_mass(0.175).with_bandwidth(468.0))
     bud = synthesize(loop)
-    rows.append(rel_row("RMS following error at 468 Hz, 0.175 kg", 0.83e-9,
-                        bud.rms_following(), "m", 0.15, sb))
-    rows.append(rel_row("RMS real error at 468 Hz, 0.175 kg", 0.23e-9, bud.rms_real(), "m",
-                        0.15, sb))
+    rows.append(
+        rel_row(
+            "RMS following error at 468 Hz, 0.175 kg",
+            0.83e-9,
+            bud.rms_following(),
+            "m",
+            0.15,
+            sb,
+        )
+    )
+    rows.append(
+        rel_row(
+            "RMS real error at 468 Hz, 0.175 kg", 0.23e-9, bud.rms_real(), "m", 0.15, sb
+        )
+    )
     notes.append(
         "The paper's 0.155 nm (section 3.3) and 0.23 nm (section 5.2) real-error RMS at "
         "468 Hz, 0.175 kg disagree; no single disturbance calibration gives both. "
@@ -111,37 +152,78 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     )
     heavy = b.with_moving_mass(0.175)
     lim = stability_limit(heavy)
-    rows.append(rel_row("stability limit (crossover), 0.175 kg", 1600.0, lim, "Hz", 0.10,
-                        "tuned PIDF, 60 deg margin"))
+    rows.append(
+        rel_row(
+            "stability limit (crossover), 0.175 kg",
+            1600.0,
+            lim,
+            "Hz",
+            0.10,
+            "tuned PIDF, 60 deg margin",
+        )
+    )
     l3 = ServoLoop(heavy.with_bandwidth(lim * 0.999)).margins()["bandwidth_3db_hz"]
-    notes.append(f"At the stability limit the closed-loop -3 dB bandwidth is {l3:.0f} Hz "
-                 "(reading 1.6 kHz as a -3 dB bandwidth would not match).")
+    notes.append(
+        f"At the stability limit the closed-loop -3 dB bandwidth is {l3:.0f} Hz "
+        "(reading 1.6 kHz as a -3 dB bandwidth would not match)."
+    )
     loop = ServoLoop(heavy.with_bandwidth(1448.0))
     bud = synthesize(loop)
     peaks = bud.peaks()
-    for paper, val in zip((7400.0, 11700.0), peaks + [float("nan")] * (2 - len(peaks)),
-                          strict=False):
-        rows.append(rel_row(f"real-error spectrum peak near {paper / 1e3:g} kHz", paper,
-                            val, "Hz", 0.03, "1448 Hz, 0.175 kg (Fig. 13c)"))
+    for paper, val in zip(
+        (7400.0, 11700.0), peaks + [float("nan")] * (2 - len(peaks)), strict=False
+    ):
+        rows.append(
+            rel_row(
+                f"real-error spectrum peak near {paper / 1e3:g} kHz",
+                paper,
+                val,
+                "Hz",
+                0.03,
+                "1448 Hz, 0.175 kg (Fig. 13c)",
+            )
+        )
     fr = loop.frf(np.array([100.0]))
     lag = -float(np.degrees(np.angle(fr.paths[("force", "sensor")][0])))
-    rows.append(abs_row("force-to-sensor phase lag at 100 Hz", 12.0, lag, "deg", 3.0,
-                        "1448 Hz, 0.175 kg (Fig. 17a)"))
+    rows.append(
+        abs_row(
+            "force-to-sensor phase lag at 100 Hz",
+            12.0,
+            lag,
+            "deg",
+            3.0,
+            "1448 Hz, 0.175 kg (Fig. 17a)",
+        )
+    )
     ov = float(20 * np.log10(abs(fr.paths[("reference", "sensor")][0])))
-    rows.append(range_row("closed-loop overshoot at 100 Hz", 0.6, ov, "dB", 0.2, 0.8,
-                          "1448 Hz, 0.175 kg; paper text 0.6 dB, 5.2/5 um = 0.34 dB"))
+    rows.append(
+        range_row(
+            "closed-loop overshoot at 100 Hz",
+            0.6,
+            ov,
+            "dB",
+            0.2,
+            0.8,
+            "1448 Hz, 0.175 kg; paper text 0.6 dB, 5.2/5 um = 0.34 dB",
+        )
+    )
     mg = loop.margins()
-    notes.append(f"At 1448 Hz crossover (0.175 kg): closed-loop -3 dB bandwidth "
-                 f"{mg['bandwidth_3db_hz']:.0f} Hz, phase margin "
-                 f"{mg['phase_margin_deg']:.1f} deg, gain margin {mg['gain_margin_db']:.1f} dB.")
+    notes.append(
+        f"At 1448 Hz crossover (0.175 kg): closed-loop -3 dB bandwidth "
+        f"{mg['bandwidth_3db_hz']:.0f} Hz, phase margin "
+        f"{mg['phase_margin_deg']:.1f} deg, gain margin {mg['gain_margin_db']:.1f} dB."
+    )
     for bwx in (468.0, 874.0):
         m3 = ServoLoop(heavy.with_bandwidth(bwx)).margins()["bandwidth_3db_hz"]
-        notes.append(f"{bwx:g} Hz crossover (0.175 kg) = {m3:.0f} Hz closed-loop -3 dB.")
+        notes.append(
+            f"{bwx:g} Hz crossover (0.175 kg) = {m3:.0f} Hz closed-loop -3 dB."
+        )
     return rows, notes
 
 
-def paper_table(groups: tuple[str, ...] | None = None, *, machine=None,
-                progress=None) -> dict[str, Any]:
+def paper_table(
+    groups: tuple[str, ...] | None = None, *, machine=None, progress=None
+) -> dict[str, Any]:
     """Compute every registered row group.
 
     Parameters
@@ -167,7 +249,7 @@ def paper_table(groups: tuple[str, ...] | None = None, *, machine=None,
     rows: list[dict] = []
     notes: list[str] = []
     for name in names:
-        with (progress(name) if progress else nullcontext()):
+        with progress(name) if progress else nullcontext():
             r, n = GROUPS[name](ctx)
         rows.extend(x.as_dict() for x in r)
         notes.extend(n)
@@ -196,7 +278,8 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     machine = ctx.get("machine")
     here = Path(__file__).resolve()
     tp_dir = ctx.get("toolpaths") or next(
-        (p / "toolpaths" for p in here.parents if (p / "toolpaths").is_dir()), None)
+        (p / "toolpaths" for p in here.parents if (p / "toolpaths").is_dir()), None
+    )
     if tp_dir is None:
         return [], ["surface rows skipped: toolpaths/ folder not found"]
     rows: list[Row] = []
@@ -208,62 +291,145 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     a5 = analyse(r5)
     pk = a5["spectrum_peaks_per_m"][:3]
     for paper in (170e3, 255e3):
-        rows.append(rel_row(f"5 um lenslet spectral peak near {paper / 1e3:g} mm^-1", paper,
-                            _nearest(pk, paper), "1/m", 0.05, setup))
+        rows.append(
+            rel_row(
+                f"5 um lenslet spectral peak near {paper / 1e3:g} mm^-1",
+                paper,
+                _nearest(pk, paper),
+                "1/m",
+                0.05,
+                setup,
+            )
+        )
     notes.append(
         "The paper's own numbers disagree on the second vibration: its model puts the "
         "real-error peaks at 7.4 and 11.7 kHz (Fig. 13c), which at 42.3 mm/s are 175 and "
         "277 mm^-1, while its 5 um surface shows 170 and 255 mm^-1 (7.2 and 10.8 kHz) "
         "and its 10 um surface 6.6 and 11.5 kHz. servosurf keeps the 7.4/11.7 kHz modes "
         f"of section 5.2; its 5 um surface peaks are "
-        f"{', '.join(f'{p / 1e3:.0f}' for p in pk)} mm^-1.")
-    rows.append(rel_row("5 um lenslet: max tool deviation from the cutting force", 295e-9,
-                        a5["deviation_max_m"], "m", 0.15, setup + " (Fig. 17b)"))
-    rows.append(Row("5 um lenslet: deviation peak lags the force peak", "lags",
-                    a5["deviation_lag_s"], "s", "> 0", bool(a5["deviation_lag_s"] > 0), setup))
-    rows.append(rel_row("5 um lenslet: overshoot after the cut (paper simulation)", 180e-9,
-                        a5["deviation_overshoot_m"], "m", 0.30, setup))
-    reported.append({"quantity": "5 um lenslet: overshoot after the cut (paper measured)",
-                     "paper": 34e-9, "servosurf": a5["deviation_overshoot_m"], "unit": "m",
-                     "comment": "the measured 34 nm is a following error, in which the "
-                                "sensor sees the carrier (m2), not the tool"})
-    rows.append(rel_row("5 um lenslet: maximum form error", 200e-9, a5["form_error_max_m"],
-                        "m", 0.30, setup + ", reference = air-cut amplitude"))
-    rows.append(Row("5 um lenslet: maximum form error lags the deepest point", "lags",
-                    a5["form_error_lag_m"], "m", "> 0", bool(a5["form_error_lag_m"] > 0),
-                    setup))
+        f"{', '.join(f'{p / 1e3:.0f}' for p in pk)} mm^-1."
+    )
+    rows.append(
+        rel_row(
+            "5 um lenslet: max tool deviation from the cutting force",
+            295e-9,
+            a5["deviation_max_m"],
+            "m",
+            0.15,
+            setup + " (Fig. 17b)",
+        )
+    )
+    rows.append(
+        Row(
+            "5 um lenslet: deviation peak lags the force peak",
+            "lags",
+            a5["deviation_lag_s"],
+            "s",
+            "> 0",
+            bool(a5["deviation_lag_s"] > 0),
+            setup,
+        )
+    )
+    rows.append(
+        rel_row(
+            "5 um lenslet: overshoot after the cut (paper simulation)",
+            180e-9,
+            a5["deviation_overshoot_m"],
+            "m",
+            0.30,
+            setup,
+        )
+    )
+    reported.append(
+        {
+            "quantity": "5 um lenslet: overshoot after the cut (paper measured)",
+            "paper": 34e-9,
+            "servosurf": a5["deviation_overshoot_m"],
+            "unit": "m",
+            "comment": "the measured 34 nm is a following error, in which the "
+            "sensor sees the carrier (m2), not the tool",
+        }
+    )
+    rows.append(
+        rel_row(
+            "5 um lenslet: maximum form error",
+            200e-9,
+            a5["form_error_max_m"],
+            "m",
+            0.30,
+            setup + ", reference = air-cut amplitude",
+        )
+    )
+    rows.append(
+        Row(
+            "5 um lenslet: maximum form error lags the deepest point",
+            "lags",
+            a5["form_error_lag_m"],
+            "m",
+            "> 0",
+            bool(a5["form_error_lag_m"] > 0),
+            setup,
+        )
+    )
     r10 = simulate(tp_dir / "lenslet_10um.toml", **kw)
     a10 = analyse(r10)
     hz10 = a10["spectrum_peaks_hz"][:3]
     for paper in (6.6e3, 11.5e3):
-        rows.append(rel_row(f"10 um lenslet vibration peak near {paper / 1e3:g} kHz", paper,
-                            _nearest(hz10, paper), "Hz", 0.15,
-                            setup + f", {a10['surface_speed_m_per_s'] * 1e3:.1f} mm/s"))
-    notes.append("10 um lenslet peaks are compared within 15 %: the paper's own two "
-                 "lenslets put the same first mode 11 % apart (7.2 and 6.6 kHz).")
+        rows.append(
+            rel_row(
+                f"10 um lenslet vibration peak near {paper / 1e3:g} kHz",
+                paper,
+                _nearest(hz10, paper),
+                "Hz",
+                0.15,
+                setup + f", {a10['surface_speed_m_per_s'] * 1e3:.1f} mm/s",
+            )
+        )
+    notes.append(
+        "10 um lenslet peaks are compared within 15 %: the paper's own two "
+        "lenslets put the same first mode 11 % apart (7.2 and 6.6 kHz)."
+    )
     # flat face: roughness by model part (no fudge term)
     spec = load_toolpath(tp_dir / "flat_facing.toml")
     fld = dataclasses.replace(spec.field, nx=FLAT_FIELD_PIXELS, ny=FLAT_FIELD_PIXELS)
     spec = dataclasses.replace(spec, field=fld)
     feed, rad = spec.path.feed_per_rev, spec.tool.nose_radius
     ra_kin = feed**2 / (18 * np.sqrt(3) * rad)
-    parts_sets = {"kinematic": (), "kinematic+force": ("tracking", "force"),
-                  "kinematic+vibration": ("tracking", "vibration"),
-                  "all": ("tracking", "force", "vibration")}
+    parts_sets = {
+        "kinematic": (),
+        "kinematic+force": ("tracking", "force"),
+        "kinematic+vibration": ("tracking", "vibration"),
+        "all": ("tracking", "force", "vibration"),
+    }
     ra = {}
     for name, parts in parts_sets.items():
         res = simulate(spec, parts=parts, **kw)
         ra[name] = analyse(res)["ra_m"]
-    rows.append(rel_row("flat face Ra, kinematic only, vs f^2/(18 sqrt(3) R)", ra_kin,
-                        ra["kinematic"], "m", 0.01, "2 um/rev, R 0.5 mm"))
+    rows.append(
+        rel_row(
+            "flat face Ra, kinematic only, vs f^2/(18 sqrt(3) R)",
+            ra_kin,
+            ra["kinematic"],
+            "m",
+            0.01,
+            "2 um/rev, R 0.5 mm",
+        )
+    )
     for name, v in ra.items():
-        reported.append({"quantity": f"flat face Ra, model parts: {name}", "paper": 1.2e-9,
-                         "servosurf": v, "unit": "m",
-                         "comment": "paper: measured, no filter; no fudge term added"})
+        reported.append(
+            {
+                "quantity": f"flat face Ra, model parts: {name}",
+                "paper": 1.2e-9,
+                "servosurf": v,
+                "unit": "m",
+                "comment": "paper: measured, no filter; no fudge term added",
+            }
+        )
     notes.append(
         f"Flat Ra: kinematic {ra['kinematic'] * 1e9:.3f} nm, +force "
         f"{ra['kinematic+force'] * 1e9:.3f} nm, +vibration "
         f"{ra['kinematic+vibration'] * 1e9:.3f} nm, all {ra['all'] * 1e9:.3f} nm against "
         "1.2 nm measured: the gap is physics the model leaves out (material side flow, "
-        "elastic recovery, tool edge, spindle), for `servosurf diagnose` to locate.")
+        "elastic recovery, tool edge, spindle), for `servosurf diagnose` to locate."
+    )
     return rows, notes

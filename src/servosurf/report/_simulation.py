@@ -43,7 +43,7 @@ def _deviation_stats(result) -> dict[str, Any]:
     """Peak force deviation, its lag behind the force peak, and the overshoot."""
     from ..toolpath import FacingToolpath
 
-    t, dev, force = result.t, result.deviation["force"], result.force
+    dev, force = result.deviation["force"], result.force
     fs = result.machine.controller.sample_rate
     out: dict[str, Any] = {}
     if isinstance(result.spec.path, FacingToolpath) or not np.any(force > 0):
@@ -91,28 +91,45 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
     speed = p.angular_speed * radius
     loop = ServoLoop(result.machine)
     gain = abs(loop.frf(np.array([p.frequency])).paths[("reference", "tool")][0])
-    air_cut = gain * p.amplitude if "tracking" in result.settings.get("parts", []) \
+    air_cut = (
+        gain * p.amplitude
+        if "tracking" in result.settings.get("parts", [])
         else p.amplitude
+    )
     prof = lenslet_centre_profile(surface, direction="y")
     y = prof.x
     centre = prof.metadata["lenslet_centre"]["y_m"]
 
     def nominal(x, a):
-        return nominal_lenslet_profile(x, amplitude=p.amplitude, frequency=p.frequency,
-                                       speed=speed, depth=p.depth_of_cut,
-                                       tool_radius=result.spec.tool.nose_radius,
-                                       centre=centre, path_amplitude=a)
+        return nominal_lenslet_profile(
+            x,
+            amplitude=p.amplitude,
+            frequency=p.frequency,
+            speed=speed,
+            depth=p.depth_of_cut,
+            tool_radius=result.spec.tool.nose_radius,
+            centre=centre,
+            path_amplitude=a,
+        )
 
-    fe = form_error_profile(y, prof.z, nominal, reference_amplitude=air_cut,
-                            cutting_direction=1)
+    fe = form_error_profile(
+        y, prof.z, nominal, reference_amplitude=air_cut, cutting_direction=1
+    )
     # form-error map: model minus the nominal lenslet at the air-cut amplitude
     # (nominal_lenslet_surface takes the cut along its x; ours runs along rows)
     xs, ys = surface.coords()
     xc = prof.metadata["lenslet_centre"]["x_m"]
     nom = nominal_lenslet_surface(
-        ys, xs, amplitude=p.amplitude, frequency=p.frequency, speed=speed,
-        depth=p.depth_of_cut, tool_radius=result.spec.tool.nose_radius,
-        centre=(centre, xc), path_amplitude=air_cut).T
+        ys,
+        xs,
+        amplitude=p.amplitude,
+        frequency=p.frequency,
+        speed=speed,
+        depth=p.depth_of_cut,
+        tool_radius=result.spec.tool.nose_radius,
+        centre=(centre, xc),
+        path_amplitude=air_cut,
+    ).T
     top = p.depth_of_cut - p.amplitude
     inside_lens = nom < top - 0.05 * p.depth_of_cut
     err = surface.z - nom
@@ -136,7 +153,11 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
     jc = int(round(prof.metadata["lenslet_centre"]["col"]))
     hp_prof = hp.z[r0:r1, jc]
     ok = np.isfinite(hp_prof)
-    ra = float(np.mean(np.abs(hp_prof[ok] - hp_prof[ok].mean()))) if ok.sum() > 2 else np.nan
+    ra = (
+        float(np.mean(np.abs(hp_prof[ok] - hp_prof[ok].mean())))
+        if ok.sum() > 2
+        else np.nan
+    )
     inside = block
     v = inside[np.isfinite(inside)]
     out.update(
@@ -148,16 +169,21 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         surface_speed_m_per_s=float(speed),
         spectrum_peaks_per_m=[pk["freq_per_m"] for pk in peaks],
         spectrum_peaks_hz=[pk["freq_per_m"] * speed for pk in peaks],
-        ra_m=ra, sa_m=float(np.mean(np.abs(v - v.mean()))),
+        ra_m=ra,
+        sa_m=float(np.mean(np.abs(v - v.mean()))),
         sq_m=float(np.sqrt(np.mean((v - v.mean()) ** 2))),
         roughness_definition="80 mm^-1 high-passed map inside the lenslet (Ra: centre "
-                             "profile along the cut)",
+        "profile along the cut)",
     )
     if not ok.any():
         out["ra_m"] = None
     _ = profile_roughness  # profile Ra with ISO filtering is used for flat faces
-    out["_plots"] = {"profile": (y, prof.z, fe), "highpass": hp, "form_error_map": err_map,
-                     "spectrum": (freq, psd, peaks)}
+    out["_plots"] = {
+        "profile": (y, prof.z, fe),
+        "highpass": hp,
+        "form_error_map": err_map,
+        "spectrum": (freq, psd, peaks),
+    }
     return out
 
 
@@ -183,10 +209,11 @@ def _flat(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         sa_m=float(np.mean(np.abs(v - v.mean()))),
         sq_m=float(np.sqrt(np.mean((v - v.mean()) ** 2))),
         sz_m=float(v.max() - v.min()),
-        form_error_max_m=None, form_error_lag_m=None,
+        form_error_max_m=None,
+        form_error_lag_m=None,
         spectrum_peaks_per_m=[pk["freq_per_m"] for pk in peaks],
         roughness_definition="unfiltered, about the least-squares plane; Ra mean over "
-                             "radial rows (across feed marks) after a line fit",
+        "radial rows (across feed marks) after a line fit",
     )
     out["_plots"] = {"highpass": hp, "spectrum": (freq, psd, peaks)}
     return out
@@ -210,10 +237,14 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
         deviation statistics (``deviation_max_m``, ``deviation_overshoot_m``,
         ``deviation_lag_s``, ``force_max_n``) and ``_plots`` data (not JSON).
     """
-    surface = result.measured if (use_measured and result.measured is not None) \
+    surface = (
+        result.measured
+        if (use_measured and result.measured is not None)
         else result.surface
-    out: dict[str, Any] = {"analysed_map": "measured" if surface is result.measured
-                           else "model"}
+    )
+    out: dict[str, Any] = {
+        "analysed_map": "measured" if surface is result.measured else "model"
+    }
     out.update(_deviation_stats(result))
     if result.spec.kind == "lenslet":
         return _lenslet(surface, result, out)

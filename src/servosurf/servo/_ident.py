@@ -15,13 +15,28 @@ from ..errors import ConfigError
 from ._loop import ServoLoop
 from ._machine import Machine
 
-__all__ = ["read_frf_csv", "write_frf_csv", "fit_percent", "open_loop_frf", "identify",
-           "Identification", "DEFAULT_IDENT_PARAMS", "set_param", "get_param"]
+__all__ = [
+    "read_frf_csv",
+    "write_frf_csv",
+    "fit_percent",
+    "open_loop_frf",
+    "identify",
+    "Identification",
+    "DEFAULT_IDENT_PARAMS",
+    "set_param",
+    "get_param",
+]
 
 #: Parameters fitted by default. ``force-constant`` is held: with the masses and
 #: stiffnesses it is not identifiable from a u -> sensor FRF (only ratios are).
-DEFAULT_IDENT_PARAMS = ("mechanics.m1", "mechanics.m2", "mechanics.k1", "mechanics.c1",
-                        "mechanics.k2", "mechanics.c2")
+DEFAULT_IDENT_PARAMS = (
+    "mechanics.m1",
+    "mechanics.m2",
+    "mechanics.k1",
+    "mechanics.c1",
+    "mechanics.k2",
+    "mechanics.c2",
+)
 
 
 def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.ndarray]:
@@ -41,7 +56,11 @@ def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
         raise ConfigError(f"{name}: cannot open FRF file: {exc.strerror}") from None
     with fh:
         rows = list(csv.reader(line for line in fh if not line.startswith("#")))
-    if not rows or [c.strip().lower() for c in rows[0][:3]] != ["frequency_hz", "real", "imag"]:
+    if not rows or [c.strip().lower() for c in rows[0][:3]] != [
+        "frequency_hz",
+        "real",
+        "imag",
+    ]:
         raise ConfigError(f"{name}: expected a header 'frequency_hz,real,imag'")
     try:
         data = np.array([[float(v) for v in r[:3]] for r in rows[1:] if r], dtype=float)
@@ -51,7 +70,9 @@ def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
         raise ConfigError(f"{name}: need at least 3 rows of three numbers")
     f = data[:, 0]
     if not (np.all(np.isfinite(data)) and f[0] > 0 and np.all(np.diff(f) > 0)):
-        raise ConfigError(f"{name}: frequencies must be positive, finite and increasing")
+        raise ConfigError(
+            f"{name}: frequencies must be positive, finite and increasing"
+        )
     return f, data[:, 1] + 1j * data[:, 2]
 
 
@@ -60,7 +81,8 @@ def write_frf_csv(path: str | Path, freq: np.ndarray, frf: np.ndarray) -> None:
     from ..commands._common import atomic_write
 
     lines = ["frequency_hz,real,imag"] + [
-        f"{f:.10g},{h.real:.10g},{h.imag:.10g}" for f, h in zip(freq, frf, strict=True)]
+        f"{f:.10g},{h.real:.10g},{h.imag:.10g}" for f, h in zip(freq, frf, strict=True)
+    ]
     atomic_write(path, lambda p: p.write_text("\n".join(lines) + "\n"))
 
 
@@ -74,7 +96,9 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
     return float(100.0 * (1.0 - np.linalg.norm(y - yhat) / den))
 
 
-def open_loop_frf(machine: Machine, freq: np.ndarray, *, digital: bool = True) -> np.ndarray:
+def open_loop_frf(
+    machine: Machine, freq: np.ndarray, *, digital: bool = True
+) -> np.ndarray:
     """Open-loop FRF from DAC voltage to sensor voltage (V/V), as in paper Fig. 6.
 
     ``G = ZOH * delay * G_I w_I^2/(s+w_I)^2 * B l * P(x_meas/Fa) * S w_s^2/(s+w_s)^2``;
@@ -88,14 +112,22 @@ def open_loop_frf(machine: Machine, freq: np.ndarray, *, digital: bool = True) -
     loop._dss_cache = None
     ch = loop._chain(np.asarray(freq, float), discrete=digital)
     pa = ch["plant"]["actuator_force"][:, loop._sensor_dof()]
-    return ch["delay"] * ch["amp"] * machine.actuator.force_constant * pa * ch["sens"] \
+    return (
+        ch["delay"]
+        * ch["amp"]
+        * machine.actuator.force_constant
+        * pa
+        * ch["sens"]
         * machine.sensor.sensitivity
+    )
 
 
 def _split(key: str) -> tuple[str, str]:
     parts = key.replace("-", "_").split(".")
     if len(parts) != 2:
-        raise ConfigError(f"parameter {key!r} must be 'section.name', e.g. mechanics.k1")
+        raise ConfigError(
+            f"parameter {key!r} must be 'section.name', e.g. mechanics.k1"
+        )
     return parts[0], parts[1]
 
 
@@ -114,7 +146,9 @@ def set_param(machine: Machine, key: str, value: float) -> Machine:
     """Copy of ``machine`` with one dotted parameter replaced."""
     sec, name = _split(key)
     section = getattr(machine, sec)
-    return dataclasses.replace(machine, **{sec: dataclasses.replace(section, **{name: value})})
+    return dataclasses.replace(
+        machine, **{sec: dataclasses.replace(section, **{name: value})}
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,9 +174,15 @@ class Identification:
     fit_percent_after: float
 
 
-def identify(machine: Machine, freq: np.ndarray, frf: np.ndarray, *,
-             params: tuple[str, ...] = DEFAULT_IDENT_PARAMS, digital: bool = True,
-             model=None) -> Identification:
+def identify(
+    machine: Machine,
+    freq: np.ndarray,
+    frf: np.ndarray,
+    *,
+    params: tuple[str, ...] = DEFAULT_IDENT_PARAMS,
+    digital: bool = True,
+    model=None,
+) -> Identification:
     """Fit machine parameters to a measured FRF by nonlinear least squares.
 
     Parameters
@@ -176,8 +216,10 @@ def identify(machine: Machine, freq: np.ndarray, frf: np.ndarray, *,
     if y.shape != freq.shape:
         raise ConfigError(f"frf shape {y.shape} differs from freq shape {freq.shape}")
     if model is None:
+
         def model(m, f):
             return open_loop_frf(m, f, digital=digital)
+
     x0 = np.log([get_param(machine, k) for k in params])
     if not np.all(np.isfinite(x0)):
         raise ConfigError("every identified parameter must start positive")
@@ -200,7 +242,10 @@ def identify(machine: Machine, freq: np.ndarray, frf: np.ndarray, *,
     sol = sp.optimize.least_squares(res, x0, x_scale=1.0, method="trf", max_nfev=400)
     fitted = build(sol.x)
     after = fit_percent(y, model(fitted, freq))
-    return Identification(machine=fitted,
-                          parameters=dict(zip(params, map(float, np.exp(sol.x)), strict=True)),
-                          initial=dict(zip(params, map(float, np.exp(x0)), strict=True)),
-                          fit_percent_before=before, fit_percent_after=after)
+    return Identification(
+        machine=fitted,
+        parameters=dict(zip(params, map(float, np.exp(sol.x)), strict=True)),
+        initial=dict(zip(params, map(float, np.exp(x0)), strict=True)),
+        fit_percent_before=before,
+        fit_percent_after=after,
+    )

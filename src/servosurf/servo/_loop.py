@@ -84,7 +84,9 @@ class PIDF:
 
     def tf_coefficients(self) -> tuple[np.ndarray, np.ndarray]:
         """Continuous numerator and denominator (descending powers of s)."""
-        num = np.array([self.kp * self.tf + self.kd, self.kp + self.ki * self.tf, self.ki])
+        num = np.array(
+            [self.kp * self.tf + self.kd, self.kp + self.ki * self.tf, self.ki]
+        )
         den = np.array([self.tf, 1.0, 0.0])
         return num, den
 
@@ -105,8 +107,9 @@ class PIDF:
         """Tustin state space ``(A, B, C, D)`` of the controller at ``fs``."""
         num, den = self.tf_coefficients()
         a, b, c, d = sp.signal.tf2ss(num, den)
-        ad, bd, cd, dd, _ = sp.signal.cont2discrete((a, b, c, d), 1.0 / self.fs,
-                                                    method="bilinear")
+        ad, bd, cd, dd, _ = sp.signal.cont2discrete(
+            (a, b, c, d), 1.0 / self.fs, method="bilinear"
+        )
         return ad, bd, cd, dd
 
 
@@ -200,8 +203,14 @@ class ServoLoop:
         ch = self._chain(freq, discrete)
         m = self.machine
         pa = ch["plant"]["actuator_force"][:, self._sensor_dof()]
-        g = ch["delay"] * ch["amp"] * m.actuator.force_constant * pa * ch["sens"] \
+        g = (
+            ch["delay"]
+            * ch["amp"]
+            * m.actuator.force_constant
+            * pa
+            * ch["sens"]
             * m.sensor.sensitivity
+        )
         return self.pidf.frf(freq, discrete=discrete) * g
 
     def frf(self, freq: np.ndarray, *, discrete: bool = True) -> LoopFRF:
@@ -227,7 +236,9 @@ class ServoLoop:
         sd = self._sensor_dof()
         sgain = mach.sensor.sensitivity
         bl = mach.actuator.force_constant
-        k = self.pidf.frf(freq, discrete=discrete) * ch["delay"] * sgain  # V per m error
+        k = (
+            self.pidf.frf(freq, discrete=discrete) * ch["delay"] * sgain
+        )  # V per m error
         gu = ch["amp"] * bl  # N per V
         hs = ch["sens"]
         pl = ch["plant"]
@@ -259,8 +270,9 @@ class ServoLoop:
         disturbance(pl["tool_force"][:, 0], pl["tool_force"][:, sd], "force")
         return LoopFRF(freq=freq, loop=loop, paths=paths)
 
-    def margins(self, *, fmin: float = 1.0, fmax: float | None = None,
-                n: int = 20000) -> dict[str, float]:
+    def margins(
+        self, *, fmin: float = 1.0, fmax: float | None = None, n: int = 20000
+    ) -> dict[str, float]:
         """Crossover, phase and gain margins and the closed-loop -3 dB bandwidth.
 
         Returns
@@ -329,7 +341,7 @@ class ServoLoop:
         c = np.zeros((2, n))
         # amplifier: I = G_I wi^2/(s+wi)^2 u ; states [I, dI/dt]
         a[0, 1] = 1.0
-        a[1, 0] = -wi**2
+        a[1, 0] = -(wi**2)
         a[1, 1] = -2 * wi
         b[1, 0] = mach.actuator.current_gain * wi**2
         bl = mach.actuator.force_constant
@@ -341,7 +353,7 @@ class ServoLoop:
         # sensor: y = ws^2/(s+ws)^2 x_meas ; states [y, dy/dt]
         xm = cx[self._sensor_dof()]
         a[10, 11] = 1.0
-        a[11, 10] = -ws**2
+        a[11, 10] = -(ws**2)
         a[11, 11] = -2 * ws
         a[11, 2:10] = ws**2 * xm
         c[0, 2:10] = cx[0]
@@ -386,24 +398,25 @@ class ServoLoop:
         # error e = -S y_m (r = 0): y_m = cy[1] x_a
         e_row = -s * cy[1]
         # controller
-        a[na:na + nc, :na] = bc @ e_row[None, :]
-        a[na:na + nc, na:na + nc] = ac
+        a[na : na + nc, :na] = bc @ e_row[None, :]
+        a[na : na + nc, na : na + nc] = ac
         # u[k] = cc xc + dc e
         u_row_a = (dc @ e_row[None, :]).ravel()
         u_row_c = cc.ravel()
         # registers: r0 <- u[k] (new), r_j <- r_{j-1}
         o = na + nc
         a[o, :na] = u_row_a
-        a[o, na:na + nc] = u_row_c
+        a[o, na : na + nc] = u_row_c
         for j in range(1, nb):
             a[o + j, o + j - 1] = 1.0
+
         # applied input at step k: (1-frac) u[k-nd] + frac u[k-nd-1]
         # u[k-nd] is register nd after this step's shift, i.e. register nd-1 before
         # (or the freshly computed u for nd = 0).
         def add_applied(col: int, weight: float) -> None:
             if col == 0:
                 a[:na, :na] += weight * np.outer(bd[:, 0], u_row_a)
-                a[:na, na:na + nc] += weight * np.outer(bd[:, 0], u_row_c)
+                a[:na, na : na + nc] += weight * np.outer(bd[:, 0], u_row_c)
             else:
                 a[:na, o + col - 1] += weight * bd[:, 0]
 
@@ -462,20 +475,27 @@ class ServoLoop:
         """
         from ..kernels._lti import _closed_loop_sim
 
-        arrays = [a for a in (reference, force, current_noise, sensor_noise) if a is not None]
+        arrays = [
+            a for a in (reference, force, current_noise, sensor_noise) if a is not None
+        ]
         if n is None:
             if not arrays:
                 raise ModelError("simulate needs at least one input array or n")
             n = len(arrays[0])
+
         def prep(a):
             if a is None:
                 return np.zeros(n)
             a = np.ascontiguousarray(a, dtype=np.float64)
             if a.shape != (n,):
-                raise ModelError(f"input arrays must all have shape ({n},), got {a.shape}")
+                raise ModelError(
+                    f"input arrays must all have shape ({n},), got {a.shape}"
+                )
             return a
-        r, f, i_n, s_n, z_off = map(prep, (reference, force, current_noise, sensor_noise,
-                                           chip_offset))
+
+        r, f, i_n, s_n, z_off = map(
+            prep, (reference, force, current_noise, sensor_noise, chip_offset)
+        )
         ad, bd, cy, ac, bc, cc, dc = self.discrete_models()
         nd, frac = self._delay_split()
         if chip is None:
@@ -483,15 +503,38 @@ class ServoLoop:
         else:
             chip_kind, chip_par = chip.kernel_args()
         out = np.zeros((5, n))
-        _closed_loop_sim(ad, bd, cy, ac, bc, cc.ravel().copy(), float(dc.ravel()[0]),
-                         self.machine.sensor.sensitivity, nd, frac, r, f, i_n, s_n,
-                         z_off, chip_kind, chip_par, out)
-        return {"tool": out[0], "sensor": out[1], "following_error": out[2],
-                "u": out[3], "force": out[4]}
+        _closed_loop_sim(
+            ad,
+            bd,
+            cy,
+            ac,
+            bc,
+            cc.ravel().copy(),
+            float(dc.ravel()[0]),
+            self.machine.sensor.sensitivity,
+            nd,
+            frac,
+            r,
+            f,
+            i_n,
+            s_n,
+            z_off,
+            chip_kind,
+            chip_par,
+            out,
+        )
+        return {
+            "tool": out[0],
+            "sensor": out[1],
+            "following_error": out[2],
+            "u": out[3],
+            "force": out[4],
+        }
 
 
-def tune_pidf(machine: Machine, *, plant: Plant | None = None,
-              bandwidth: float | None = None) -> PIDF:
+def tune_pidf(
+    machine: Machine, *, plant: Plant | None = None, bandwidth: float | None = None
+) -> PIDF:
     """Tune a PIDF for a crossover frequency and phase margin.
 
     Parameters

@@ -51,36 +51,102 @@ _PAPER = "seed paper"
 class Mechanics:
     """Lumped-parameter mechanics of Fig. 5 (Eqs 1 to 4). All SI."""
 
-    m1: float = param(0.020, unit="kg", low=0.0, low_open=True,
-                      doc="tool and tool holder tip (x1)", source="calibrated")
-    m2: float = param(0.055, unit="kg", low=0.0, low_open=True,
-                      doc="coil carrier with sensor (x2)", source="calibrated")
-    m3: float = param(1.2, unit="kg", low=0.0, low_open=True,
-                      doc="X carriage (x3)", source="design estimate")
-    m4: float = param(0.004, unit="kg", low=0.0, low_open=True,
-                      doc="flexible appendage of the carrier (x4)", source="calibrated")
-    k1: float = param(9.0e7, unit="N/m", low=0.0, low_open=True,
-                      doc="tool-to-carrier stiffness", source="calibrated")
-    c1: float = param(8.0, unit="N s/m", low=0.0, doc="tool-to-carrier damping",
-                      source="calibrated")
-    k2: float = param(2.0e4, unit="N/m", low=0.0, doc="flexure bearing stiffness",
-                      source="calibrated")
-    c2: float = param(2.0, unit="N s/m", low=0.0, doc="flexure bearing damping",
-                      source="calibrated")
-    k3: float = param(5.0e7, unit="N/m", low=0.0, low_open=True,
-                      doc="carriage-to-ground stiffness", source="design estimate")
-    c3: float = param(300.0, unit="N s/m", low=0.0, doc="carriage-to-ground damping",
-                      source="design estimate")
-    k4: float = param(1.0e7, unit="N/m", low=0.0, low_open=True,
-                      doc="appendage-to-carrier stiffness", source="calibrated")
-    c4: float = param(1.0, unit="N s/m", low=0.0, doc="appendage-to-carrier damping",
-                      source="calibrated")
-    k5: float = param(0.0, unit="N/m", low=0.0, doc="coil-to-magnet stiffness",
-                      source="paper: ironless flat voice coil, none expected")
-    c5: float = param(0.0, unit="N s/m", low=0.0, doc="coil-to-magnet damping (eddy)",
-                      source="paper: none expected")
+    m1: float = param(
+        0.020,
+        unit="kg",
+        low=0.0,
+        low_open=True,
+        doc="tool and tool holder tip (x1)",
+        source="calibrated",
+    )
+    m2: float = param(
+        0.055,
+        unit="kg",
+        low=0.0,
+        low_open=True,
+        doc="coil carrier with sensor (x2)",
+        source="calibrated",
+    )
+    m3: float = param(
+        1.2,
+        unit="kg",
+        low=0.0,
+        low_open=True,
+        doc="X carriage (x3)",
+        source="design estimate",
+    )
+    m4: float = param(
+        0.004,
+        unit="kg",
+        low=0.0,
+        low_open=True,
+        doc="flexible appendage of the carrier (x4)",
+        source="calibrated",
+    )
+    k1: float = param(
+        9.0e7,
+        unit="N/m",
+        low=0.0,
+        low_open=True,
+        doc="tool-to-carrier stiffness",
+        source="calibrated",
+    )
+    c1: float = param(
+        8.0, unit="N s/m", low=0.0, doc="tool-to-carrier damping", source="calibrated"
+    )
+    k2: float = param(
+        2.0e4, unit="N/m", low=0.0, doc="flexure bearing stiffness", source="calibrated"
+    )
+    c2: float = param(
+        2.0, unit="N s/m", low=0.0, doc="flexure bearing damping", source="calibrated"
+    )
+    k3: float = param(
+        5.0e7,
+        unit="N/m",
+        low=0.0,
+        low_open=True,
+        doc="carriage-to-ground stiffness",
+        source="design estimate",
+    )
+    c3: float = param(
+        300.0,
+        unit="N s/m",
+        low=0.0,
+        doc="carriage-to-ground damping",
+        source="design estimate",
+    )
+    k4: float = param(
+        1.0e7,
+        unit="N/m",
+        low=0.0,
+        low_open=True,
+        doc="appendage-to-carrier stiffness",
+        source="calibrated",
+    )
+    c4: float = param(
+        1.0,
+        unit="N s/m",
+        low=0.0,
+        doc="appendage-to-carrier damping",
+        source="calibrated",
+    )
+    k5: float = param(
+        0.0,
+        unit="N/m",
+        low=0.0,
+        doc="coil-to-magnet stiffness",
+        source="paper: ironless flat voice coil, none expected",
+    )
+    c5: float = param(
+        0.0,
+        unit="N s/m",
+        low=0.0,
+        doc="coil-to-magnet damping (eddy)",
+        source="paper: none expected",
+    )
     added_mass_on: Literal["m1", "m2"] = param(
-        "m2", doc="which mass receives extra moving mass", source="decision")
+        "m2", doc="which mass receives extra moving mass", source="decision"
+    )
 
     @property
     def moving_mass(self) -> float:
@@ -92,16 +158,38 @@ class Mechanics:
 class Actuator:
     """Current amplifier (Eq 5) and voice-coil motor (Eq 6)."""
 
-    force_constant: float = param(8.0, unit="N/A", low=0.0, low_open=True,
-                                  doc="motor constant B*l", source="calibrated")
-    current_gain: float = param(1.0, unit="A/V", low=0.0, low_open=True,
-                                doc="current amplifier DC gain G_I", source="assumed")
-    current_bandwidth: float = param(400e3, unit="Hz", low=0.0, low_open=True,
-                                     doc="current loop -3 dB bandwidth",
-                                     source=_PAPER + " section 2.2")
-    max_current: float = param(3.0, unit="A", low=0.0, low_open=True,
-                               doc="amplifier current limit (saturation)",
-                               source="assumed")
+    force_constant: float = param(
+        8.0,
+        unit="N/A",
+        low=0.0,
+        low_open=True,
+        doc="motor constant B*l",
+        source="calibrated",
+    )
+    current_gain: float = param(
+        1.0,
+        unit="A/V",
+        low=0.0,
+        low_open=True,
+        doc="current amplifier DC gain G_I",
+        source="assumed",
+    )
+    current_bandwidth: float = param(
+        400e3,
+        unit="Hz",
+        low=0.0,
+        low_open=True,
+        doc="current loop -3 dB bandwidth",
+        source=_PAPER + " section 2.2",
+    )
+    max_current: float = param(
+        3.0,
+        unit="A",
+        low=0.0,
+        low_open=True,
+        doc="amplifier current limit (saturation)",
+        source="assumed",
+    )
 
     @property
     def corner(self) -> float:
@@ -113,13 +201,27 @@ class Actuator:
 class Sensor:
     """Capacitive displacement sensor (Eq 7)."""
 
-    sensitivity: float = param(4.0e5, unit="V/m", low=0.0, low_open=True,
-                               doc="sensor sensitivity S", source="assumed (CPL190 range)")
-    bandwidth: float = param(15e3, unit="Hz", low=0.0, low_open=True,
-                             doc="sensor -3 dB bandwidth", source=_PAPER + " section 2.2")
+    sensitivity: float = param(
+        4.0e5,
+        unit="V/m",
+        low=0.0,
+        low_open=True,
+        doc="sensor sensitivity S",
+        source="assumed (CPL190 range)",
+    )
+    bandwidth: float = param(
+        15e3,
+        unit="Hz",
+        low=0.0,
+        low_open=True,
+        doc="sensor -3 dB bandwidth",
+        source=_PAPER + " section 2.2",
+    )
     location: Literal["carrier", "tool"] = param(
-        "carrier", doc="mass the sensor measures: carrier (x2) or tool (x1)",
-        source="paper text: fixed to the coil carrier")
+        "carrier",
+        doc="mass the sensor measures: carrier (x2) or tool (x1)",
+        source="paper text: fixed to the coil carrier",
+    )
 
     @property
     def corner(self) -> float:
@@ -135,23 +237,53 @@ class Controller:
     (open-loop crossover) and ``phase-margin``; see :func:`servosurf.servo.tune_pidf`.
     """
 
-    sample_rate: float = param(199.6e3, unit="Hz", low=0.0, low_open=True,
-                               doc="controller update rate", source=_PAPER + " 4.1")
-    delay: float = param(1.0, unit="samples", low=0.0, high=20.0,
-                         doc="computation and transport delay beyond the ZOH",
-                         source="calibrated to the 1.6 kHz stability limit")
-    bandwidth: float = param(468.0, unit="Hz", low=1.0,
-                             doc="target open-loop crossover frequency",
-                             source=_PAPER + " optimum at 0.175 kg")
-    phase_margin: float = param(60.0, unit="deg", low=5.0, high=89.0,
-                                doc="target phase margin at the crossover",
-                                source="MATLAB pidtune default")
-    integral_ratio: float = param(0.035, unit="", low=0.0, high=1.0,
-                                  doc="rho: Ki = rho * Kp * w_c",
-                                  source="calibrated: 100 Hz overshoot, 12 deg force lag")
-    derivative_filter_ratio: float = param(8.0, unit="", low=1.0, high=1e3,
-                                           doc="N: Tf = 1 / (N * w_c)",
-                                           source="calibrated: 12 deg force lag")
+    sample_rate: float = param(
+        199.6e3,
+        unit="Hz",
+        low=0.0,
+        low_open=True,
+        doc="controller update rate",
+        source=_PAPER + " 4.1",
+    )
+    delay: float = param(
+        1.0,
+        unit="samples",
+        low=0.0,
+        high=20.0,
+        doc="computation and transport delay beyond the ZOH",
+        source="calibrated to the 1.6 kHz stability limit",
+    )
+    bandwidth: float = param(
+        468.0,
+        unit="Hz",
+        low=1.0,
+        doc="target open-loop crossover frequency",
+        source=_PAPER + " optimum at 0.175 kg",
+    )
+    phase_margin: float = param(
+        60.0,
+        unit="deg",
+        low=5.0,
+        high=89.0,
+        doc="target phase margin at the crossover",
+        source="MATLAB pidtune default",
+    )
+    integral_ratio: float = param(
+        0.035,
+        unit="",
+        low=0.0,
+        high=1.0,
+        doc="rho: Ki = rho * Kp * w_c",
+        source="calibrated: 100 Hz overshoot, 12 deg force lag",
+    )
+    derivative_filter_ratio: float = param(
+        8.0,
+        unit="",
+        low=1.0,
+        high=1e3,
+        doc="N: Tf = 1 / (N * w_c)",
+        source="calibrated: 12 deg force lag",
+    )
     kp: float | None = param(None, unit="V/V", doc="explicit proportional gain")
     ki: float | None = param(None, unit="V/(V s)", doc="explicit integral gain")
     kd: float | None = param(None, unit="V s/V", doc="explicit derivative gain")
@@ -175,17 +307,25 @@ class PSDModel:
     machine file.
     """
 
-    level: float = param(0.0, unit="unit/sqrt(Hz)", low=0.0,
-                         doc="amplitude spectral density at ref-frequency")
-    ref_frequency: float = param(1000.0, unit="Hz", low=0.0, low_open=True,
-                                 doc="frequency where level applies")
-    slope: float = param(0.0, unit="", low=-6.0, high=6.0,
-                         doc="power-law exponent of the PSD")
-    corner: float = param(1e9, unit="Hz", low=0.0, low_open=True,
-                          doc="roll-off corner frequency")
+    level: float = param(
+        0.0,
+        unit="unit/sqrt(Hz)",
+        low=0.0,
+        doc="amplitude spectral density at ref-frequency",
+    )
+    ref_frequency: float = param(
+        1000.0, unit="Hz", low=0.0, low_open=True, doc="frequency where level applies"
+    )
+    slope: float = param(
+        0.0, unit="", low=-6.0, high=6.0, doc="power-law exponent of the PSD"
+    )
+    corner: float = param(
+        1e9, unit="Hz", low=0.0, low_open=True, doc="roll-off corner frequency"
+    )
     order: float = param(2.0, unit="", low=0.0, high=12.0, doc="roll-off order")
-    floor: float = param(0.0, unit="unit/sqrt(Hz)", low=0.0,
-                         doc="white floor added to the power law")
+    floor: float = param(
+        0.0, unit="unit/sqrt(Hz)", low=0.0, doc="white floor added to the power law"
+    )
     csv: str = param("", doc="measured PSD file: frequency_hz,psd")
 
 
@@ -195,12 +335,17 @@ class Disturbances:
 
     name: str = param("default", doc="name of this calibration")
     source: str = param("", doc="what this calibration reproduces")
-    sensor_noise: PSDModel = param(default_factory=PSDModel, unit="m^2/Hz",
-                                   doc="Ws: sensor noise, position equivalent")
-    current_noise: PSDModel = param(default_factory=PSDModel, unit="A^2/Hz",
-                                    doc="Wi: motor current noise")
-    base_vibration: PSDModel = param(default_factory=PSDModel, unit="m^2/Hz",
-                                     doc="Wg: base displacement")
+    sensor_noise: PSDModel = param(
+        default_factory=PSDModel,
+        unit="m^2/Hz",
+        doc="Ws: sensor noise, position equivalent",
+    )
+    current_noise: PSDModel = param(
+        default_factory=PSDModel, unit="A^2/Hz", doc="Wi: motor current noise"
+    )
+    base_vibration: PSDModel = param(
+        default_factory=PSDModel, unit="m^2/Hz", doc="Wg: base displacement"
+    )
 
 
 @dataclass(frozen=True)
@@ -215,7 +360,8 @@ class Machine:
     controller: Controller = param(default_factory=Controller)
     disturbances: Disturbances = param(default_factory=Disturbances)
     alternative_disturbances: tuple[Disturbances, ...] = param(
-        default_factory=tuple, doc="other named calibrations of the disturbances")
+        default_factory=tuple, doc="other named calibrations of the disturbances"
+    )
     path: str = param("", doc="file this machine was read from (set by the loader)")
 
     def with_moving_mass(self, mass: float) -> Machine:
@@ -232,14 +378,22 @@ class Machine:
                 f"--mass {mass:g} kg leaves {target} = {new:g} kg; the moving mass must "
                 f"exceed {mech.moving_mass - getattr(mech, target):g} kg"
             )
-        return dataclasses.replace(self, mechanics=dataclasses.replace(mech, **{target: new}))
+        return dataclasses.replace(
+            self, mechanics=dataclasses.replace(mech, **{target: new})
+        )
 
     def with_bandwidth(self, bandwidth: float) -> Machine:
         """Return a copy tuned for a new crossover ``bandwidth`` in Hz (gains cleared)."""
         if not bandwidth > 0:
             raise ConfigError(f"bandwidth must be > 0 Hz, got {bandwidth!r}")
-        c = dataclasses.replace(self.controller, bandwidth=float(bandwidth),
-                                kp=None, ki=None, kd=None, tf=None)
+        c = dataclasses.replace(
+            self.controller,
+            bandwidth=float(bandwidth),
+            kp=None,
+            ki=None,
+            kd=None,
+            tf=None,
+        )
         return dataclasses.replace(self, controller=c)
 
     def with_disturbances(self, name: str) -> Machine:
@@ -277,7 +431,9 @@ def _resolve_csv(machine: Machine, base: Path) -> Machine:
     return dataclasses.replace(
         machine,
         disturbances=fix(machine.disturbances),
-        alternative_disturbances=tuple(fix(d) for d in machine.alternative_disturbances),
+        alternative_disturbances=tuple(
+            fix(d) for d in machine.alternative_disturbances
+        ),
     )
 
 

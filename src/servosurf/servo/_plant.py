@@ -77,8 +77,11 @@ class Plant:
         rhs[:, 1, 1] = 1.0
         rhs[:, :, 2] = self.kg[None, :] + self.cg[None, :] * s[:, None]
         x = np.linalg.solve(d, rhs)
-        return {"tool_force": x[:, :, 0], "actuator_force": x[:, :, 1],
-                "base": x[:, :, 2]}
+        return {
+            "tool_force": x[:, :, 0],
+            "actuator_force": x[:, :, 1],
+            "base": x[:, :, 2],
+        }
 
     def state_space(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Continuous state space of the mechanics with force inputs.
@@ -159,8 +162,13 @@ def paper_eq_frf(machine: Machine, freq: np.ndarray) -> dict[str, np.ndarray]:
     b2 = m.k2 + m.c2 * s
     b3 = m.k3 + m.c3 * s + m.m3 * s**2
     b4 = m.k4 + m.c4 * s
-    z = b4 * m.m4 * s**2 / (b4 + m.m4 * s**2) + b3 * b2 / (b3 + b2) + m.k5 + m.c5 * s \
+    z = (
+        b4 * m.m4 * s**2 / (b4 + m.m4 * s**2)
+        + b3 * b2 / (b3 + b2)
+        + m.k5
+        + m.c5 * s
         + m.m2 * s**2
+    )
     den = z * (b1 + m.m1 * s**2) + b1 * m.m1 * s**2
     eq1 = 1.0 / (z * b1 / (z + b1) + m.m1 * s**2)
     eq2 = b1 / den

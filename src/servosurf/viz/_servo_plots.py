@@ -8,12 +8,23 @@ import numpy as np
 
 from ._common import figure, save
 
-__all__ = ["plot_disturbance_frfs", "plot_cas", "plot_rms_vs_bandwidth",
-           "plot_error_spectra", "plot_power_shares", "plot_loop_bode"]
+__all__ = [
+    "plot_disturbance_frfs",
+    "plot_cas",
+    "plot_rms_vs_bandwidth",
+    "plot_error_spectra",
+    "plot_power_shares",
+    "plot_loop_bode",
+]
 
-_SRC_LABEL = {"sensor_noise": "sensor noise Ws", "current_noise": "current noise Wi",
-              "base_vibration": "base vibration Wg", "base": "base vibration",
-              "force": "cutting force", "reference": "reference"}
+_SRC_LABEL = {
+    "sensor_noise": "sensor noise Ws",
+    "current_noise": "current noise Wi",
+    "base_vibration": "base vibration Wg",
+    "base": "base vibration",
+    "force": "cutting force",
+    "reference": "reference",
+}
 
 
 def plot_loop_bode(frfs: dict, path: str | Path) -> Path:
@@ -22,16 +33,25 @@ def plot_loop_bode(frfs: dict, path: str | Path) -> Path:
     ``frfs`` maps a label (e.g. "0.175 kg") to a :class:`~servosurf.servo.LoopFRF`.
     """
     fig, ax = figure(2, 1, figsize=(8, 7), sharex=True)
-    paths = [("reference", "tool", "m/m"), ("sensor_noise", "tool", "m/m"),
-             ("current_noise", "tool", "m/A"), ("base", "tool", "m/m"),
-             ("force", "tool", "m/N")]
+    paths = [
+        ("reference", "tool", "m/m"),
+        ("sensor_noise", "tool", "m/m"),
+        ("current_noise", "tool", "m/A"),
+        ("base", "tool", "m/m"),
+        ("force", "tool", "m/N"),
+    ]
     styles = ["-", "--", ":", "-."]
     for k, (label, fr) in enumerate(frfs.items()):
         for j, (i, o, unit) in enumerate(paths):
             h = fr.paths[(i, o)]
             c = f"C{j}"
-            ax[0].loglog(fr.freq, np.abs(h), styles[k % 4], color=c,
-                         label=f"{_SRC_LABEL.get(i, i)} [{unit}] ({label})")
+            ax[0].loglog(
+                fr.freq,
+                np.abs(h),
+                styles[k % 4],
+                color=c,
+                label=f"{_SRC_LABEL.get(i, i)} [{unit}] ({label})",
+            )
             ax[1].semilogx(fr.freq, np.degrees(np.angle(h)), styles[k % 4], color=c)
     ax[0].set_ylabel("|FRF| to tool position (SI units per input)")
     ax[0].legend(fontsize=6, ncol=2)
@@ -48,10 +68,16 @@ def plot_disturbance_frfs(frfs: dict, path: str | Path) -> Path:
     fig, ax = figure(figsize=(8, 5))
     styles = ["-", "--", ":", "-."]
     for k, (label, fr) in enumerate(frfs.items()):
-        for j, (i, unit) in enumerate((("sensor_noise", "m/m"), ("current_noise", "m/A"),
-                                       ("base", "m/m"))):
-            ax.loglog(fr.freq, np.abs(fr.paths[(i, "sensor")]), styles[k % 4],
-                      color=f"C{j}", label=f"{_SRC_LABEL[i]} [{unit}] ({label})")
+        for j, (i, unit) in enumerate(
+            (("sensor_noise", "m/m"), ("current_noise", "m/A"), ("base", "m/m"))
+        ):
+            ax.loglog(
+                fr.freq,
+                np.abs(fr.paths[(i, "sensor")]),
+                styles[k % 4],
+                color=f"C{j}",
+                label=f"{_SRC_LABEL[i]} [{unit}] ({label})",
+            )
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("|FRF| to measured position")
     ax.set_title("Disturbance to sensor FRFs (cf. Fig. 9a)")
@@ -66,8 +92,13 @@ def plot_cas(budgets: dict, path: str | Path) -> Path:
     styles = ["-", "--", ":", "-."]
     for k, (label, b) in enumerate(budgets.items()):
         for j, (name, c) in enumerate(b.cas_real().items()):
-            ax.semilogx(b.freq, c * 1e9, styles[k % 4], color=f"C{j}",
-                        label=f"{_SRC_LABEL.get(name, name)} ({label})")
+            ax.semilogx(
+                b.freq,
+                c * 1e9,
+                styles[k % 4],
+                color=f"C{j}",
+                label=f"{_SRC_LABEL.get(name, name)} ({label})",
+            )
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("CAS of real positioning error [nm]")
     ax.set_title("Cumulative amplitude spectrum (Eq. 11, cf. Fig. 9b)")
@@ -81,15 +112,30 @@ def plot_rms_vs_bandwidth(study, path: str | Path) -> Path:
     fig, ax = figure(1, 2, figsize=(11, 4.5))
     for i, m in enumerate(study.masses):
         c = f"C{i}"
-        ax[0].plot(study.bandwidths, study.rms_real[i] * 1e9, "o-", color=c, ms=3,
-                   label=f"{m:g} kg")
-        ax[1].plot(study.bandwidths, study.rms_following[i] * 1e9, "o-", color=c, ms=3,
-                   label=f"{m:g} kg")
+        ax[0].plot(
+            study.bandwidths,
+            study.rms_real[i] * 1e9,
+            "o-",
+            color=c,
+            ms=3,
+            label=f"{m:g} kg",
+        )
+        ax[1].plot(
+            study.bandwidths,
+            study.rms_following[i] * 1e9,
+            "o-",
+            color=c,
+            ms=3,
+            label=f"{m:g} kg",
+        )
         if np.isfinite(study.optimal_bandwidth[i]):
             ax[0].axvline(study.optimal_bandwidth[i], color=c, ls=":", lw=1)
-            ax[0].annotate(f"opt {study.optimal_bandwidth[i]:.0f} Hz",
-                           (study.optimal_bandwidth[i], study.optimal_rms[i] * 1e9),
-                           fontsize=7, color=c)
+            ax[0].annotate(
+                f"opt {study.optimal_bandwidth[i]:.0f} Hz",
+                (study.optimal_bandwidth[i], study.optimal_rms[i] * 1e9),
+                fontsize=7,
+                color=c,
+            )
         if np.isfinite(study.stability_limit[i]):
             for a in ax:
                 a.axvline(study.stability_limit[i], color=c, ls="--", lw=0.8)
@@ -113,8 +159,12 @@ def plot_error_spectra(budgets: dict, path: str | Path) -> Path:
         a.loglog(b.freq, b.real_total, color="C2", label="real positioning error PSD")
         for pk in b.peaks():
             a.axvline(pk, color="C2", ls=":", lw=0.8)
-            a.annotate(f"{pk / 1e3:.1f} kHz", (pk, np.interp(pk, b.freq, b.real_total)),
-                       fontsize=7, color="C2")
+            a.annotate(
+                f"{pk / 1e3:.1f} kHz",
+                (pk, np.interp(pk, b.freq, b.real_total)),
+                fontsize=7,
+                color="C2",
+            )
         a.set_ylabel("PSD [m^2/Hz]")
         a.set_title(label)
         a.grid(True, which="both", alpha=0.3)
@@ -123,7 +173,9 @@ def plot_error_spectra(budgets: dict, path: str | Path) -> Path:
     return save(fig, path)
 
 
-def plot_power_shares(bandwidths, shares: dict, path: str | Path, *, title: str = "") -> Path:
+def plot_power_shares(
+    bandwidths, shares: dict, path: str | Path, *, title: str = ""
+) -> Path:
     """Share of real-error power per source against bandwidth (Fig. 15)."""
     fig, ax = figure(figsize=(8, 4.5))
     bottom = np.zeros(len(bandwidths))

@@ -1,0 +1,494 @@
+"""The diagnosis: locate the mismatch, explain it with the catalogue, refit.
+
+:func:`diagnose` runs the whole pipeline on a manifest:
+
+1. build the nominal case (machine at the manifest's moving mass and bandwidth,
+   controller tuned once and then held) and one likelihood block per recording
+   channel (:mod:`._blocks`);
+2. **locate** the mismatch of the nominal model with the locators
+   (:mod:`._locate`) and place the catalogue's grids on it;
+3. **rank and fit** catalogue terms by forward stepwise selection with a BIC-like
+   score and a backward pruning step (:mod:`._select`);
+4. **decide**: re-run the locators on the residual of the selected model. Nothing
+   found and nothing selected: ``consistent``; terms selected and nothing left:
+   ``explained``; terms selected and something left: ``partly-explained``
+   (``unexplained`` when the terms explain less than 30 % of the mismatch);
+   nothing selected but a mismatch: ``unexplained``, with where it is.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+from ._blocks import (
+    Context,
+    CutBlock,
+    ForceBlock,
+    FRFBlock,
+    PointsBlock,
+    SpectralBlock,
+    TimeBlock,
+)
+from ._catalogue import CATALOGUE, Effect, Locations
+from ._locate import Mismatch, locate
+from ._manifest import Manifest, load_manifest
+from ._select import Engine, Term
+from ._sim import CaseModel, ModelParams
+
+__all__ = ["Diagnosis", "diagnose", "build_case", "VERDICTS"]
+
+VERDICTS = ("consistent", "explained", "partly-explained", "unexplained")
+#: Share of the mismatch the selected terms must explain not to be "unexplained".
+MIN_EXPLAINED_SHARE = 0.3
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`.
+
+    Attributes
+    ----------
+    verdict : str
+        One of :data:`VERDICTS`.
+    mismatches : list of Mismatch
+        Located departures of the nominal model (before fitting).
+    remainder : list of Mismatch
+        What the locators still find after fitting.
+    terms : list of Term
+        Selected terms (physics and recalibration).
+    params : ModelParams
+        The fitted model.
+    explanations : list of dict
+        JSON-ready selected physics terms.
+    recalibration : list of dict
+        JSON-ready recalibration terms.
+    fit_before, fit_after : dict of str to float
+        Fit percent per recording (MATLAB's NRMSE fit), nominal and fitted.
+    unexplained_power_fraction : float
+        Share of the mismatch (excess deviance) left after fitting, 0..1.
+    ranking : list of dict
+        First-pass ranking of module configurations (top 10).
+    """
+
+    verdict: str
+    mismatches: list
+    remainder: list
+    terms: list
+    params: ModelParams
+    explanations: list
+    recalibration: list
+    fit_before: dict
+    fit_after: dict
+    unexplained_power_fraction: float
+    ranking: list = field(default_factory=list)
+    case: CaseModel | None = None
+    blocks: list = field(default_factory=list)
+    blocks_nominal: list = field(default_factory=list)
+    manifest: Manifest | None = None
+    deviance: dict = field(default_factory=dict)
+    tentative: list = field(default_factory=list)
+
+    @property
+    def fit_before_percent(self) -> float:
+        """Mean fit percent over recordings with a deterministic part (nominal)."""
+        return _mean(self.fit_before)
+
+    @property
+    def fit_after_percent(self) -> float:
+        """Mean fit percent over recordings with a deterministic part (fitted)."""
+        return _mean(self.fit_after)
+
+    def to_dict(self) -> dict:
+        """The JSON summary of ``servosurf diagnose --json``."""
+        return {
+            "verdict": self.verdict,
+            "mismatches": [m.to_dict() for m in self.mismatches],
+            "explanations": self.explanations,
+            "recalibration": self.recalibration,
+            "tentative": self.tentative,
+            "remainder": [m.to_dict() for m in self.remainder],
+            "fit_before_percent": self.fit_before_percent,
+            "fit_after_percent": self.fit_after_percent,
+            "fit_percent_per_recording": {k: {"before": self.fit_before[k],
+                                              "after": self.fit_after.get(k)}
+                                          for k in self.fit_before},
+            "unexplained_power_fraction": self.unexplained_power_fraction,
+            "ranking": self.ranking,
+            "deviance": self.deviance,
+        }
+
+
+def _mean(d: dict) -> float:
+    v = [x for x in d.values() if x is not None and np.isfinite(x)]
+    return float(np.mean(v)) if v else float("nan")
+
+
+def build_case(man: Manifest) -> CaseModel:
+    """The nominal :class:`CaseModel` of a manifest."""
+    from ..servo import load_machine
+    from ..toolpath import load_toolpath
+
+    m = load_machine(man.machine)
+    if man.disturbances:
+        m = m.with_disturbances(man.disturbances)
+    if man.moving_mass is not None:
+        m = m.with_moving_mass(man.moving_mass)
+    if man.bandwidth is not None:
+        m = m.with_bandwidth(man.bandwidth)
+    tp = load_toolpath(man.toolpath) if man.toolpath is not None else None
+    from ..errors import ModelError
+
+    try:
+        case = CaseModel(m, tp, specific_force=man.specific_force)
+    except ModelError as exc:
+        raise ConfigError(f"{man.path}: {exc}") from None
+    if not case.is_stable(ModelParams()):
+        raise ConfigError(f"{man.path}: the nominal loop is unstable at this bandwidth "
+                          "and moving mass")
+    return case
+
+
+def _check_fs(rec, fs: float, case: CaseModel) -> None:
+    if abs(fs / case.fs - 1.0) > 1e-4:
+        raise ConfigError(f"{rec.path}: sampled at {fs:.6g} Hz but the controller "
+                          f"runs at {case.fs:.6g} Hz; record at the controller rate")
+
+
+def _points_of(rec, case: CaseModel):
+    spec = case.toolpath
+    d = rec.data
+    o = rec.options
+    if rec.kind == "surface":
+        z = d["z"]
+        ny, nx = z.shape
+        fld = spec.field
+        x0 = float(o.get("x0", d.get("x0", fld.center_x - 0.5 * (nx - 1) * d["dx"])))
+        y0 = float(o.get("y0", d.get("y0", fld.center_y - 0.5 * (ny - 1) * d["dy"])))
+        xx, yy = np.meshgrid(x0 + d["dx"] * np.arange(nx), y0 + d["dy"] * np.arange(ny))
+        valid = np.isfinite(z)
+        flat = np.nonzero(valid.ravel())[0]
+        return xx.ravel()[flat], yy.ravel()[flat], z.ravel()[flat], (z.shape, flat), None
+    z = d["z"]
+    n = z.size
+    valid = np.isfinite(z)
+    if "radius" in o:
+        r = float(o["radius"])
+        s = d.get("x0", 0.0) + d["dx"] * np.arange(n)
+        th = float(o.get("angle-start", 0.0)) + s / r
+        x, y = r * np.cos(th), r * np.sin(th)
+    else:
+        ang = float(o.get("direction", math.pi / 2))
+        if "start" in o:
+            sx, sy = (float(v) for v in o["start"])
+            s = d.get("x0", 0.0) + d["dx"] * np.arange(n)
+        else:
+            fld = spec.field
+            half = 0.5 * (n - 1) * d["dx"]
+            sx = fld.center_x - half * math.cos(ang)
+            sy = fld.center_y - half * math.sin(ang)
+            s = d["dx"] * np.arange(n)
+        x, y = sx + s * math.cos(ang), sy + s * math.sin(ang)
+    return x[valid], y[valid], z[valid], None, s[valid]
+
+
+def _make_blocks(man: Manifest, ctx: Context, p: ModelParams) -> list:
+    case = ctx.case
+    blocks = []
+    for rec in man.recordings:
+        d = rec.data
+        if rec.kind == "following-error":
+            _check_fs(rec, d["fs"], case)
+            recs = d["records"]
+            det = [r for r in recs if np.any(r.get("command", 0.0))
+                   or np.any(r.get("force", 0.0))]
+            if det:
+                blocks.append(TimeBlock(ctx, rec.name, recs, d["fs"], p))
+            else:
+                lengths = sorted({r["fe"].size for r in recs})
+                for n in lengths:
+                    fe = np.array([r["fe"] for r in recs if r["fe"].size == n])
+                    name = rec.name if len(lengths) == 1 else f"{rec.name}[{n}]"
+                    blocks.append(SpectralBlock(ctx, name, fe, d["fs"]))
+        elif rec.kind.startswith("frf-"):
+            blocks.append(FRFBlock(ctx, rec.name, rec.kind, d["freq"], d["frf"], p))
+        elif rec.kind == "cut":
+            _check_fs(rec, d["fs"], case)
+            cb = CutBlock(ctx, rec.name, d, p)
+            blocks.append(cb)
+            blocks.append(ForceBlock(ctx, cb, d["force"], ModelParams()))
+        elif rec.kind in ("surface", "profile"):
+            x, y, z, grid, along = _points_of(rec, case)
+            if z.size < 16:
+                raise ConfigError(f"{rec.path}: fewer than 16 valid points")
+            blocks.append(PointsBlock(ctx, rec.name, rec.kind, x, y, z, p, grid=grid,
+                                      along=along))
+    return blocks
+
+
+def _rebuild(blocks, ctx: Context, man: Manifest, p: ModelParams):
+    """Blocks with the noise weighting of ``p`` (FRF and force noise levels kept)."""
+    new = _make_blocks(man, ctx, p)
+    for b_new, b_old in zip(new, blocks, strict=True):
+        if isinstance(b_new, FRFBlock | ForceBlock):
+            b_new.sigma = b_old.sigma
+    return new
+
+
+def _locations(case: CaseModel, blocks, mism: list[Mismatch], ctx: Context) -> Locations:
+    m = case.machine
+    spec = case.toolpath
+    loc = Locations(fs=case.fs, moving_mass=m.mechanics.moving_mass, k2=m.mechanics.k2)
+    strokes = []
+    currents = []
+    rec_len = 4096
+    for b in blocks:
+        if isinstance(b, TimeBlock):
+            for i, rec in enumerate(b.records):
+                if "command" in rec:
+                    strokes.append(float(np.max(np.abs(rec["command"]))))
+                currents.append(np.abs(b.predict(ModelParams(), i)["u"])
+                                * m.actuator.current_gain)
+        if isinstance(b, SpectralBlock):
+            rec_len = b.nsamp
+    if spec is not None:
+        t = np.linspace(0, 0.05, 2000)
+        strokes.append(float(np.max(np.abs(spec.path.z_at(t)))))
+    loc.stroke = max(strokes) if strokes and max(strokes) > 1e-9 else 10e-6
+    if currents:
+        c = np.concatenate(currents)
+        lo, hi = np.quantile(c, 0.8), 0.98 * float(c.max())
+        if hi > lo > 0:
+            loc.current_levels = list(np.geomspace(lo, hi, 14))
+    loc.record_length = rec_len
+    # modes and lines from the located mismatch
+    modes, lines, orders = [], [], []
+    for mm in mism:
+        f = mm.details.get("frequency_hz")
+        if mm.test == "line" and f is not None:
+            lines.append(f)
+        if f is not None and f > 500 and mm.domain in ("frf", "time", "spectrum"):
+            modes.append(f)
+        if "band_hz" in mm.details and mm.domain in ("frf", "spectrum", "time"):
+            lo_, hi_ = mm.details["band_hz"]
+            if lo_ > 400:
+                modes.append(math.sqrt(lo_ * hi_))
+        if mm.test == "spindle-order":
+            orders.append(int(mm.details["order"]))
+    # FRF residual peaks
+    for b in blocks:
+        if isinstance(b, FRFBlock):
+            r = b.residual(ModelParams())
+            k = b.freq.size
+            mag = np.abs(r[:k]) + np.abs(r[k:2 * k])
+            if mag.size > 5:
+                sm = np.convolve(mag, np.ones(3) / 3, mode="same")
+                j = int(np.argmax(sm))
+                if sm[j] > 4:
+                    modes.append(float(b.freq[j]))
+    uniq = []
+    for f in modes:
+        if all(abs(math.log(f / g)) > 0.03 for g in uniq):
+            uniq.append(f)
+    loc.mode_freqs = uniq[:8]
+    lu = []
+    for f in sorted(set(lines)):
+        if all(abs(f - g) > 2 * case.fs / rec_len for g in lu):
+            lu.append(f)
+    loc.line_freqs = lu[:16]
+    loc.orders = list(dict.fromkeys(orders + [1, 2, 3]))[:8]
+    d = m.disturbances.sensor_noise
+    from ..noise import evaluate_psd
+
+    loc.sensor_floor = d.floor
+    loc.sensor_corner = d.corner
+    loc.sensor_level = float(math.sqrt(evaluate_psd(d, np.array([1000.0]))[0]))
+    loc.nominal_delay = m.controller.delay
+    loc.specific_force = case.specific_force
+    loc.nominal = {"moving_mass": m.mechanics.moving_mass,
+                   "flexure_stiffness": m.mechanics.k2,
+                   "flexure_damping": max(m.mechanics.c2, 1e-3),
+                   "force_constant": m.actuator.force_constant}
+    loc.kinds = {b.kind for b in blocks}
+
+    def probe(f):
+        p0 = ModelParams()
+        s = case.noise_psd(p0, np.array([f]), "fe")[0]
+        h = abs(case.paths(p0, np.array([f]))[("base", "fe")][0])
+        return math.sqrt(2 * case.fs * max(s, 1e-40) / rec_len) / max(h, 1e-12)
+    loc.line_probe = probe
+    return loc
+
+
+def _refs(case: CaseModel) -> dict[str, float]:
+    refs = {"mains 50 Hz": 50.0, "mains 60 Hz": 60.0}
+    if case.toolpath is not None:
+        refs["spindle"] = case.toolpath.path.rev_per_s
+        if case.toolpath.kind == "lenslet":
+            refs["FTS"] = case.toolpath.path.frequency
+    return refs
+
+
+def _fit_percent(blocks, p: ModelParams) -> dict[str, float]:
+    from ..servo import fit_percent
+
+    out: dict[str, float] = {}
+    for b in blocks:
+        key = b.recording if not isinstance(b, ForceBlock) else f"{b.recording}:force"
+        if isinstance(b, TimeBlock):
+            y = np.concatenate([r["fe"] for r in b.records])
+            yh = np.concatenate([b.predict(p, i)["fe"] for i in range(len(b.records))])
+            out[key] = fit_percent(y, yh) if np.all(np.isfinite(yh)) else float("nan")
+        elif isinstance(b, ForceBlock):
+            yh = b.cut.predict(p)["force"]
+            out[key] = fit_percent(b.force, yh)
+        elif isinstance(b, FRFBlock):
+            h = b.model(p)
+            g = b.gain_offset(p) if b.gain else 1.0
+            out[key] = fit_percent(b.frf, h * g)
+        elif isinstance(b, SpectralBlock):
+            s = b.expected(p)
+            from ._locate import third_octaves
+
+            e = third_octaves(b.freq[0], b.freq[-1] * 1.0001)
+            idx = np.digitize(b.freq, e) - 1
+            nb = e.size - 1
+            cnt = np.maximum(np.bincount(idx, minlength=nb)[:nb], 1)
+            ym = np.log10(np.bincount(idx, weights=b.pbar, minlength=nb)[:nb] / cnt
+                          + 1e-300)
+            sm = np.log10(np.bincount(idx, weights=s, minlength=nb)[:nb] / cnt + 1e-300)
+            ok = np.bincount(idx, minlength=nb)[:nb] > 0
+            out[key] = fit_percent(ym[ok], sm[ok])
+        elif isinstance(b, PointsBlock):
+            r = b.nuisance_fit(p)
+            out[key] = fit_percent(b.z, b.z - r)
+    return out
+
+
+def _term_dict(t: Term, p: ModelParams, loc: Locations, fb: dict, fa: dict) -> dict:
+    return {"effect": t.effect.name, "parameters": t.effect.report(p, t.slot, loc),
+            "delta_bic": float(t.score), "delta_deviance": float(t.delta_deviance),
+            "fit_before_percent": _mean({k: fb[k] for k in fb
+                                         if _visible(t.effect, k, fb)}),
+            "fit_after_percent": _mean({k: fa[k] for k in fa
+                                        if _visible(t.effect, k, fa)})}
+
+
+_KIND_OF: dict[str, str] = {}
+
+
+def _visible(eff: Effect, key: str, d: dict) -> bool:
+    kind = _KIND_OF.get(key.split(":")[0])
+    return kind is None or kind in eff.channels
+
+
+def _merge_terms(terms: list[Term]) -> list[tuple[Effect, list[Term]]]:
+    out: dict[str, tuple[Effect, list[Term]]] = {}
+    for t in terms:
+        out.setdefault(t.effect.name, (t.effect, []))[1].append(t)
+    return list(out.values())
+
+
+def diagnose(manifest: str | Path | Manifest, *, progress=None,
+             effects=None, max_terms: int = 6) -> Diagnosis:
+    """Diagnose the recordings of a manifest against the simulator.
+
+    Parameters
+    ----------
+    manifest : str, Path or Manifest
+        The manifest (see :mod:`servosurf.diagnose._manifest`).
+    progress : callable, optional
+        ``progress(str)`` receives one line per fitted candidate.
+    effects : sequence of Effect, optional
+        Catalogue modules to consider (default: all of :data:`CATALOGUE`).
+    max_terms : int, default: 6
+        Largest number of selected terms.
+
+    Returns
+    -------
+    Diagnosis
+        Verdict, located mismatches, selected explanations with SI parameters,
+        fit percentages and the fitted model.
+
+    Raises
+    ------
+    ConfigError
+        On a bad manifest or recording.
+    """
+    man = manifest if isinstance(manifest, Manifest) else load_manifest(manifest)
+    for rec in man.recordings:
+        _KIND_OF[rec.name] = rec.kind
+    case = build_case(man)
+    ctx = Context(case)
+    p0 = ModelParams()
+    blocks0 = _make_blocks(man, ctx, p0)
+    refs = _refs(case)
+    mism = locate(blocks0, p0, refs)
+    loc = _locations(case, blocks0, mism, ctx)
+    effs = list(effects) if effects is not None else list(CATALOGUE)
+    eng = Engine(blocks0, loc, effs, lambda p: _rebuild(blocks0, ctx, man, p))
+    p, terms, ranking = eng.run(max_terms=max_terms, progress=progress)
+    blocks1 = _rebuild(blocks0, ctx, man, p)
+    rem = locate(blocks1, p, refs)
+    # deviance bookkeeping with the final weighting
+    eng_final = Engine(blocks1, loc, effs, None)
+    d_nom = eng_final.block_deviances(p0)
+    d_fit = eng_final.block_deviances(p)
+    n_b = [b.n for b in blocks1]
+    explained = max(sum(d_nom) - sum(d_fit), 0.0)
+    left = 0.0
+    for db, nb in zip(d_fit, n_b, strict=True):
+        ex = db - nb
+        if ex > 3 * math.sqrt(2 * nb):
+            left += ex
+    left_loc = 0.0
+    by_block: dict[str, float] = {}
+    for m in rem:
+        by_block[m.recording] = max(by_block.get(m.recording, 0.0), m.significance)
+    for v in by_block.values():
+        left_loc += v * math.log(10.0) * 2.0
+    left = max(left, left_loc)
+    frac = left / (left + explained) if (left + explained) > 0 else 0.0
+    fb = _fit_percent(blocks0, p0)
+    fa = _fit_percent(blocks1, p)
+    phys = [t for t in terms if not t.effect.recalibration]
+    recal = [t for t in terms if t.effect.recalibration]
+    expl = []
+    for eff, ts in _merge_terms(phys):
+        params: dict = {}
+        for t in ts:
+            params.update(eff.report(p, t.slot, loc))
+        d = _term_dict(ts[0], p, loc, fb, fa)
+        d["parameters"] = params
+        d["delta_bic"] = float(sum(t.score for t in ts))
+        d["delta_deviance"] = float(sum(t.delta_deviance for t in ts))
+        expl.append(d)
+    recal_d = [_term_dict(t, p, loc, fb, fa) for t in recal]
+    remainder = bool(rem)
+    tentative: list = []
+    if not terms:
+        verdict = "unexplained" if remainder else "consistent"
+    elif not remainder:
+        verdict = "explained"
+    else:
+        share = explained / (explained + left) if explained + left > 0 else 0.0
+        if share < MIN_EXPLAINED_SHARE:
+            verdict = "unexplained"
+            tentative, expl = expl, []
+        else:
+            verdict = "partly-explained"
+    rank = [{"effect": c.effect.name, "config": c.config.label,
+             "delta_deviance_linear": round(float(c.lam), 2),
+             "score": round(float(c.score), 2)} for c in ranking[:10]]
+    return Diagnosis(
+        verdict=verdict, mismatches=mism, remainder=rem, terms=terms, params=p,
+        explanations=expl, recalibration=recal_d, fit_before=fb, fit_after=fa,
+        unexplained_power_fraction=float(min(max(frac, 0.0), 1.0)) if (
+            remainder or terms) else 0.0,
+        ranking=rank, case=case, blocks=blocks1, blocks_nominal=blocks0, manifest=man,
+        deviance={"nominal": float(sum(d_nom)), "fitted": float(sum(d_fit)),
+                  "observations": int(sum(n_b))}, tentative=tentative)

@@ -1,0 +1,345 @@
+"""Rank, fit and select catalogue terms (forward stepwise, BIC-like score).
+
+DISCOVERY.md section 5.2, steps 3 to 5:
+
+* **templates**: for every module configuration, the change of every block's
+  whitened residual when the module is switched on at a probe value;
+* **rank**: the linearised deviance reduction ``Lambda`` of projecting the current
+  residual on the configuration's templates, scored
+  ``Lambda - q ln n - 2 ln(M) - C`` (q parameters, n observations, M
+  configurations of the module, C = 6);
+* **fit**: the best few are fitted by nonlinear least squares of the exact
+  deviance *together with every term already accepted* (relinearisation), in log
+  space for positive parameters, with columns scaled by the solver;
+* **select**: the best exact score is accepted when positive; the noise weighting is
+  rebuilt with the accepted terms and the loop repeats. After the forward pass
+  every term is tested by removal (backward step) with the same score.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy as sp
+
+from ._catalogue import Config, Effect, Locations
+from ._sim import ModelParams
+
+__all__ = ["Engine", "Term", "Candidate"]
+
+#: Constant of the selection score (DISCOVERY.md: -6).
+SCORE_CONSTANT = 6.0
+#: Extra penalty of recalibration terms (they must clearly beat physics).
+RECAL_PENALTY = 20.0
+
+
+@dataclass
+class Term:
+    """An accepted term: a module and (for multi-term modules) its slot."""
+
+    effect: Effect
+    slot: int = 0
+    config: Config | None = None
+    delta_deviance: float = 0.0
+    score: float = 0.0
+
+
+@dataclass
+class Candidate:
+    """A ranked module configuration."""
+
+    effect: Effect
+    config: Config
+    lam: float
+    score: float
+    coefs: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+class Engine:
+    """Deviance of a set of blocks and the stepwise search over the catalogue.
+
+    Parameters
+    ----------
+    blocks : list of Block
+        Likelihood blocks (rebuilt through ``rebuild`` after each accepted term).
+    loc : Locations
+        Grid placement from the locators.
+    effects : sequence of Effect
+        Candidate modules.
+    rebuild : callable
+        ``rebuild(p) -> blocks``: the blocks with their noise model at ``p``.
+    """
+
+    def __init__(self, blocks, loc: Locations, effects, rebuild) -> None:
+        self.blocks = list(blocks)
+        self.loc = loc
+        self.effects = list(effects)
+        self.rebuild = rebuild
+        self._cache: dict = {}
+        self.n_total = int(sum(b.n for b in self.blocks))
+        self.log = []
+
+    # ------------------------------------------------------------ deviance
+    def block_residual(self, i: int, p: ModelParams) -> np.ndarray:
+        b = self.blocks[i]
+        key = (i, id(b), p.key(b.tags))
+        r = self._cache.get(key)
+        if r is None:
+            r = b.residual(p)
+            if len(self._cache) > 400:
+                for k in list(self._cache)[:200]:
+                    del self._cache[k]
+            self._cache[key] = r
+        return r
+
+    def residuals(self, p: ModelParams) -> list[np.ndarray]:
+        """Whitened residual of every block."""
+        return [self.block_residual(i, p) for i in range(len(self.blocks))]
+
+    def deviance(self, p: ModelParams) -> float:
+        """Total deviance (sum of squares of every block's residual)."""
+        return float(sum(float(r @ r) for r in self.residuals(p)))
+
+    def block_deviances(self, p: ModelParams) -> list[float]:
+        """Deviance per block."""
+        return [float(r @ r) for r in self.residuals(p)]
+
+    def _relevant(self, eff: Effect) -> list[int]:
+        return [i for i, b in enumerate(self.blocks) if set(b.tags) & set(eff.tags)]
+
+    # ------------------------------------------------------------ screening
+    def _templates(self, eff: Effect, p: ModelParams, cfg: Config, base: list):
+        cols = []
+        idx = self._relevant(eff)
+        for q, _probe in eff.columns(p, cfg, self.loc):
+            col = {i: self.block_residual(i, q) - base[i] for i in idx}
+            cols.append(col)
+        return cols
+
+    @staticmethod
+    def _project(cols: list[dict], base: list) -> tuple[float, np.ndarray]:
+        k = len(cols)
+        g = np.zeros((k, k))
+        v = np.zeros(k)
+        for a in range(k):
+            for i, ca in cols[a].items():
+                v[a] += float(ca @ base[i])
+                for b in range(a, k):
+                    cb = cols[b].get(i)
+                    if cb is not None:
+                        g[a, b] += float(ca @ cb)
+        g = g + np.triu(g, 1).T
+        d = np.sqrt(np.maximum(np.diag(g), 1e-300))
+        gs = g / np.outer(d, d)
+        vs = v / d
+        if not np.all(np.isfinite(gs)) or not np.all(np.isfinite(vs)):
+            return 0.0, np.zeros(k)
+        c, *_ = np.linalg.lstsq(gs + 1e-10 * np.eye(k), vs, rcond=1e-10)
+        lam = float(vs @ c)
+        return max(lam, 0.0), -c / d
+
+    def penalty(self, eff: Effect, n_configs: int) -> float:
+        """Score penalty of one term of ``eff`` with ``n_configs`` configurations."""
+        pen = eff.n_params() * math.log(max(self.n_total, 2)) \
+            + 2.0 * math.log(max(n_configs, 1)) + SCORE_CONSTANT
+        if eff.recalibration:
+            pen += RECAL_PENALTY
+        return pen
+
+    def screen(self, p: ModelParams, terms: list[Term]) -> list[Candidate]:
+        """Rank every configuration of every admissible module at ``p``."""
+        base = self.residuals(p)
+        out = []
+        for eff in self.effects:
+            if not self._relevant(eff):
+                continue
+            if eff.slots(p) >= eff.max_terms:
+                continue
+            if eff.max_terms == 1 and eff.active(p):
+                continue
+            cfgs = eff.configs(self.loc, p)
+            if not cfgs:
+                continue
+            for cfg in cfgs:
+                cols = self._templates(eff, p, cfg, base)
+                lam, coefs = self._project(cols, base)
+                out.append(Candidate(eff, cfg, lam, lam - self.penalty(eff, len(cfgs)),
+                                     coefs))
+        out.sort(key=lambda c: -c.score)
+        return out
+
+    # ------------------------------------------------------------ fitting
+    def _frees(self, p: ModelParams, terms: list[Term]):
+        frees = []
+        for t in terms:
+            frees += t.effect.free(p, t.slot, self.loc)
+        return frees
+
+    def fit(self, p: ModelParams, terms: list[Term], *, max_nfev: int = 60,
+            only_last: bool = False) -> ModelParams:
+        """Nonlinear least squares of the exact deviance over the terms' parameters.
+
+        Parameters
+        ----------
+        p : ModelParams
+            Start.
+        terms : list of Term
+            Terms whose parameters are free (``only_last``: the last one only).
+        max_nfev : int, default: 60
+            Function evaluations of the solver.
+
+        Returns
+        -------
+        ModelParams
+            The fitted model (never worse than the start).
+        """
+        frees = self._frees(p, terms[-1:] if only_last else terms)
+        if not frees:
+            return p
+
+        def to_x(q):
+            x = []
+            for f in frees:
+                v = float(f.get(q))
+                v = min(max(v, f.lo), f.hi)
+                x.append(math.log(max(v, 1e-300)) if f.log else v)
+            return np.array(x)
+
+        def from_x(x):
+            q = p
+            for f, v in zip(frees, x, strict=True):
+                q = f.set(q, math.exp(v) if f.log else v)
+            return q
+
+        lo = np.array([math.log(f.lo) if f.log else f.lo for f in frees])
+        hi = np.array([math.log(f.hi) if f.log else f.hi for f in frees])
+        x0 = np.clip(to_x(p), lo + 1e-12 * (hi - lo), hi - 1e-12 * (hi - lo))
+        scale = np.array([1.0 if f.log else max(abs(v), 1e-3 * (f.hi - f.lo) / 1e3)
+                          for f, v in zip(frees, x0, strict=True)])
+
+        def fun(z):
+            q = from_x(x0 + z * scale)
+            return np.concatenate(self.residuals(q))
+
+        d0 = self.deviance(from_x(x0))
+        try:
+            sol = sp.optimize.least_squares(
+                fun, np.zeros(x0.size), bounds=((lo - x0) / scale, (hi - x0) / scale),
+                method="trf", x_scale="jac", diff_step=1e-4, max_nfev=max_nfev,
+                xtol=1e-6, ftol=1e-8)
+            q = from_x(x0 + sol.x * scale)
+            if self.deviance(q) <= d0:
+                return q
+        except (ValueError, np.linalg.LinAlgError):
+            pass
+        return from_x(x0)
+
+    def line_search_1d(self, p: ModelParams, term: Term) -> ModelParams:
+        """Golden-section search on a single (log) parameter: thresholded modules."""
+        (f,) = term.effect.free(p, term.slot, self.loc)
+        v0 = float(f.get(p))
+        a, b = math.log(v0) - 0.7, math.log(v0) + 0.7
+
+        def d(x):
+            return self.deviance(f.set(p, math.exp(x)))
+        grid = np.linspace(a, b, 9)
+        vals = [d(x) for x in grid]
+        k = int(np.argmin(vals))
+        lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+        res = sp.optimize.minimize_scalar(d, bounds=(lo, hi), method="bounded",
+                                          options={"xatol": 1e-4})
+        best = res.x if res.fun <= vals[k] else grid[k]
+        return f.set(p, math.exp(best))
+
+    # ------------------------------------------------------------ selection
+    def run(self, *, max_terms: int = 6, n_fit: int = 3, progress=None):
+        """Forward stepwise selection, then backward pruning.
+
+        Returns
+        -------
+        p : ModelParams
+            The selected model.
+        terms : list of Term
+            Accepted terms in order.
+        ranking : list of Candidate
+            The first ranking (the located mismatch against every module).
+        """
+        p = ModelParams()
+        terms: list[Term] = []
+        ranking = None
+        for _ in range(max_terms):
+            d_cur = self.deviance(p)
+            cands = self.screen(p, terms)
+            if ranking is None:
+                ranking = cands
+            self.log.append({"deviance": d_cur, "top": [
+                (c.effect.name, c.config.label, round(c.lam, 1), round(c.score, 1))
+                for c in cands[:8]]})
+            tried = []
+            seen = set()
+            for c in cands:
+                if len(tried) >= n_fit:
+                    break
+                if c.score <= -50.0 or c.effect.name in seen:
+                    continue
+                seen.add(c.effect.name)
+                tried.append(c)
+            best = None
+            for c in tried:
+                q = c.effect.start(p, c.config, c.coefs, self.loc)
+                slot = c.effect.slots(q) - 1
+                tnew = Term(c.effect, slot, c.config)
+                if c.effect.name == "amplifier-saturation":
+                    q = self.line_search_1d(q, tnew)
+                q = self.fit(q, terms + [tnew], only_last=True)
+                q = self.fit(q, terms + [tnew])
+                lam = d_cur - self.deviance(q)
+                n_cfg = max(len(c.effect.configs(self.loc, p)), 1)
+                score = lam - self.penalty(c.effect, n_cfg)
+                if progress:
+                    progress(f"{c.effect.name} [{c.config.label}]: dD {lam:.1f}, "
+                             f"score {score:.1f}")
+                if best is None or score > best[0]:
+                    best = (score, q, tnew, lam)
+            if best is None or best[0] <= 0:
+                break
+            score, p, tnew, lam = best
+            tnew.delta_deviance = lam
+            tnew.score = score
+            terms.append(tnew)
+            self.blocks = self.rebuild(p)
+            self._cache.clear()
+        p, terms = self.prune(p, terms)
+        return p, terms, ranking or []
+
+    def prune(self, p: ModelParams, terms: list[Term]):
+        """Backward step: drop terms whose removal does not cost their penalty."""
+        changed = True
+        while changed and len(terms) > 1:
+            changed = False
+            d_full = self.deviance(p)
+            worst = None
+            for j, t in enumerate(terms):
+                q = t.effect.remove(p, t.slot)
+                rest = [u if u.effect is not t.effect or u.slot < t.slot
+                        else Term(u.effect, u.slot - 1, u.config, u.delta_deviance,
+                                  u.score)
+                        for k, u in enumerate(terms) if k != j]
+                q = self.fit(q, rest, max_nfev=30)
+                n_cfg = max(len(t.effect.configs(self.loc, q)), 1)
+                score = (self.deviance(q) - d_full) - self.penalty(t.effect, n_cfg)
+                if worst is None or score < worst[0]:
+                    worst = (score, q, rest, t)
+            if worst is not None and worst[0] < 0:
+                p, terms = worst[1], worst[2]
+                changed = True
+        # final contributions: removal cost of each term at the selected model
+        d_full = self.deviance(p)
+        for t in terms:
+            q = t.effect.remove(p, t.slot)
+            t.delta_deviance = self.deviance(q) - d_full
+            n_cfg = max(len(t.effect.configs(self.loc, p)), 1)
+            t.score = t.delta_deviance - self.penalty(t.effect, n_cfg)
+        return p, terms
