@@ -106,6 +106,7 @@ def test_simulate_cli_json_keys(tmp_path, capsys):
         "sq_m",
     ):
         assert key in data
+    assert data["analysed_map"] == "measured"  # default: the CP300 20X model
     assert 150e-9 < data["form_error_max_m"] < 350e-9
     assert data["form_error_lag_m"] > 0
     assert any(abs(p - 173e3) < 10e3 for p in data["spectrum_peaks_per_m"][:3])

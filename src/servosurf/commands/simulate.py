@@ -52,8 +52,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--instrument",
         metavar="NAME",
-        default=None,
-        help="interferometer model to apply, e.g. newview-20x (default: none)",
+        default="cp300-20x",
+        help="interferometer model applied to the machined map: cp300-20x (default, the "
+        "paper's instrument), newview-20x/50x/100x, or none",
     )
     p.add_argument(
         "--format",
@@ -149,7 +150,7 @@ def run(args) -> int:
         mass=0.175 if args.mass is None else args.mass,
         seed=args.seed,
         parts=tuple(args.parts),
-        instrument=args.instrument,
+        instrument=None if args.instrument == "none" else args.instrument,
     )
     with stage("analysis"):
         summary = analyse(res)

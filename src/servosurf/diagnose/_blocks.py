@@ -124,20 +124,21 @@ class Context:
             self._memo.pop(next(iter(self._memo)))
         return v
 
-    def cut_sim(self, p: ModelParams, n: int) -> dict:
-        """Loop simulation of the case's toolpath with chip force, n samples from 0."""
+    def cut_sim(self, p: ModelParams, n: int, k0: int = 0) -> dict:
+        """Cut of the case's toolpath: n samples from sample k0, at rest at k0."""
         n = int(n)
+        k0 = int(k0)
 
         def run():
-            t = np.arange(n) / self.case.fs
-            ref = self.case.toolpath.path.z_at(t)
-            return self.case.simulate(p, reference=ref, chip=True)
+            t = (k0 + np.arange(n)) / self.case.fs
+            return self.case.simulate_path(p, t)
 
         kp = p.key(SIM_TAGS)
         for key, v in list(self._memo.items()):
-            if len(key) == 3 and key[0] == kp and key[1] == "cut" and key[2] >= n:
+            if (len(key) == 4 and key[0] == kp and key[1] == "cut" and key[3] == k0
+                    and key[2] >= n):
                 return {k: a[:n] for k, a in v.items()}
-        return self.memo((kp, "cut", n), run)
+        return self.memo((kp, "cut", n, k0), run)
 
     def trajectory(self, p: ModelParams):
         """Deterministic tool trajectory of the toolpath under ``p``."""
@@ -308,14 +309,20 @@ class CutBlock(TimeBlock):
     """A cut: following error (GLS as :class:`TimeBlock`) of the toolpath cut."""
 
     def __init__(self, ctx: Context, name: str, data: dict, p_noise: ModelParams) -> None:
+        """Build from a cut recording (``fs``, ``t``, ``fe``; loop at rest at t[0])."""
         fs = data["fs"]
         idx = np.rint(np.asarray(data["t"]) * fs).astype(np.int64)
         if idx[0] < 0:
             from ..errors import ConfigError
 
             raise ConfigError(f"{name}: cut time_s must start at or after 0 s")
-        self.idx = idx
-        self.n_sim = int(idx[-1]) + 1
+        if np.any(np.diff(idx) != 1):
+            from ..errors import ConfigError
+
+            raise ConfigError(f"{name}: cut time_s must be one contiguous record at "
+                              "the controller rate")
+        self.k0 = int(idx[0])
+        self.n_sim = int(idx.size)
         rec = {"fe": np.asarray(data["fe"], dtype=float)}
         super().__init__(ctx, name, [rec], fs, p_noise)
         self.kind = "cut"
@@ -323,8 +330,7 @@ class CutBlock(TimeBlock):
     tags = SIM_TAGS
 
     def predict(self, p: ModelParams, i: int = 0) -> dict:
-        sim = self.ctx.cut_sim(p, self.n_sim)
-        return {k: v[self.idx] for k, v in sim.items()}
+        return self.ctx.cut_sim(p, self.n_sim, self.k0)
 
 
 class ForceBlock(Block):

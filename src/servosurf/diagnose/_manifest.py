@@ -8,7 +8,8 @@ A manifest is a TOML file::
     bandwidth = 468.0               # Hz, open-loop crossover
     moving-mass = 0.175             # kg, m1 + m2
     disturbances = "section-5.2"    # optional disturbance calibration
-    specific-cutting-force = 2.6e9  # optional, N/m^2 (thrust per chip area)
+    workpiece = "nip.toml"          # optional workpiece TOML (its k_t); default NiP
+    specific-cutting-force = 1.0e9  # optional, N/m^2 (thrust per chip area), overrides
 
     [[recording]]
     path = "idle.npz"
@@ -63,7 +64,7 @@ KINDS = ("following-error", "frf-open-loop", "frf-closed-loop", "frf-force", "cu
          "surface", "profile")
 
 _CASE_KEYS = {"machine", "toolpath", "bandwidth", "moving-mass", "disturbances",
-              "specific-cutting-force", "name", "description"}
+              "specific-cutting-force", "workpiece", "name", "description"}
 _ALIASES = {"mass": "moving-mass", "moving_mass": "moving-mass",
             "bandwidth-hz": "bandwidth", "bandwidth_hz": "bandwidth",
             "moving-mass-kg": "moving-mass", "specific_cutting_force":
@@ -116,8 +117,8 @@ class Manifest:
         m1 + m2 in kg (None: the machine's).
     disturbances : str or None
         Disturbance calibration name.
-    specific_force : float
-        Specific cutting force in N/m^2.
+    specific_force : float or None
+        Specific thrust pressure in N/m^2 (None: the built-in NiP workpiece's).
     recordings : tuple of Recording
         The recordings in manifest order.
     """
@@ -128,7 +129,7 @@ class Manifest:
     bandwidth: float | None
     moving_mass: float | None
     disturbances: str | None
-    specific_force: float
+    specific_force: float | None
     recordings: tuple[Recording, ...]
 
 
@@ -214,8 +215,20 @@ def load_manifest(path: str | Path) -> Manifest:
         if "bandwidth" in norm else None
     mass = _number(norm["moving-mass"], "moving-mass (kg)", where) \
         if "moving-mass" in norm else None
-    kt = _number(norm.get("specific-cutting-force", 2.6e9),
-                 "specific-cutting-force (N/m^2)", where)
+    kt = None
+    if "workpiece" in norm:
+        wp = Path(str(norm["workpiece"]))
+        cands = [wp if wp.is_absolute() else base / wp, Path("workpieces") / wp,
+                 Path("workpieces") / (wp.name + ".toml")]
+        found = next((c for c in cands if c.is_file()), None)
+        if found is None:
+            raise ConfigError(f"{where}: workpiece {str(wp)!r}: no such file")
+        from ..cutting import load_workpiece
+
+        kt = float(load_workpiece(found).material.specific_thrust_pressure)
+    if "specific-cutting-force" in norm:
+        kt = _number(norm["specific-cutting-force"], "specific-cutting-force (N/m^2)",
+                     where)
     dist = norm.get("disturbances")
     if recs is None or not isinstance(recs, list) or not recs:
         raise ConfigError(f"{where}: no [[recording]] entries (each needs path and kind)")

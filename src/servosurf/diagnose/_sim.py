@@ -182,12 +182,18 @@ class CaseModel:
         Nominal machine (moving mass and bandwidth already applied).
     toolpath : ToolpathSpec, optional
         The toolpath of cut recordings and surface maps.
-    specific_force : float, default: 2.6e9
-        Nominal specific cutting force k_t in N/m^2 (thrust per chip area).
+    specific_force : float, optional
+        Nominal specific thrust pressure k_t in N/m^2 (thrust per chip area);
+        default the built-in NiP workpiece's
+        (:class:`servosurf.cutting.Material`).
     """
 
     def __init__(self, machine: Machine, toolpath=None, *,
-                 specific_force: float = 2.6e9) -> None:
+                 specific_force: float | None = None) -> None:
+        if specific_force is None:
+            from ..cutting import load_workpiece
+
+            specific_force = load_workpiece(None).material.specific_thrust_pressure
         self.machine = machine
         self.toolpath = toolpath
         self.specific_force = float(specific_force)
@@ -373,14 +379,42 @@ class CaseModel:
                                 np.ascontiguousarray(cc.ravel()), float(dc.ravel()[0]))
         return self._cache[key]
 
+    def kt(self, p: ModelParams) -> float:
+        """Specific thrust pressure under ``p`` in N/m^2."""
+        return self.specific_force if p.specific_force is None else float(
+            p.specific_force)
+
     def chip_args(self, p: ModelParams) -> tuple[float, float, float, float]:
-        """``(k_t, radius, top, area)`` of the chip force for the case's toolpath."""
-        kt = self.specific_force if p.specific_force is None else float(p.specific_force)
-        radius = self.tool_radius()
-        if self.toolpath is not None and self.toolpath.kind == "facing":
-            path = self.toolpath.path
-            return kt, radius, 0.0, float(path.feed_per_rev * path.depth_of_cut)
-        return kt, radius, 0.0, -1.0
+        """``(k_t, radius, top, area)`` of the lenslet chip force (plunge model)."""
+        return self.kt(p), self.tool_radius(), 0.0, -1.0
+
+    def facing_force(self, p: ModelParams, t: np.ndarray) -> np.ndarray:
+        """Steady facing thrust ``k_t A`` (N), ramped in over the first revolution.
+
+        As :func:`servosurf.simulation.simulate`: the feed-limited chip section of
+        :func:`servosurf.cutting.facing_chip_area`, ramped from the record's start.
+        """
+        from ..cutting import facing_chip_area
+
+        path = self.toolpath.path
+        key = ("facing_area",)
+        if key not in self._cache:
+            self._cache[key] = facing_chip_area(self.tool_radius(), path.feed_per_rev,
+                                                path.depth_of_cut)
+        ramp = np.clip((t - t[0]) * path.rev_per_s, 0.0, 1.0)
+        return self.kt(p) * self._cache[key] * ramp
+
+    def simulate_path(self, p: ModelParams, t: np.ndarray) -> dict[str, np.ndarray]:
+        """Cut the case's toolpath at times ``t`` (s), loop at rest at ``t[0]``.
+
+        Lenslets: the chip force of a round tool plunging into the flat face at
+        z = 0, from the actual tool height; facing: the steady feed-limited chip
+        force (see :meth:`facing_force`).
+        """
+        ref = self.toolpath.path.z_at(t)
+        if self.toolpath.kind == "facing":
+            return self.simulate(p, reference=ref, force=self.facing_force(p, t))
+        return self.simulate(p, reference=ref, chip=True)
 
     def simulate(self, p: ModelParams, *, reference: np.ndarray,
                  force: np.ndarray | None = None, chip: bool = False,

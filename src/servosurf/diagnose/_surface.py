@@ -136,9 +136,7 @@ def tool_trajectory(case: CaseModel, p: ModelParams, *, periods: int = 12,
     if sim is not None and sim["tool"].size >= n:
         x1 = sim["tool"]
     else:
-        t = np.arange(n) / fs
-        ref = spec.path.z_at(t)
-        x1 = case.simulate(p, reference=ref, chip=True)["tool"]
+        x1 = case.simulate_path(p, np.arange(n) / fs)["tool"]
     t = np.arange(x1.size) / fs
     if spec.kind != "lenslet":
         period = 2.0 / fs

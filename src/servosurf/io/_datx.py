@@ -17,6 +17,7 @@ the file is handed to h5py.
 
 from __future__ import annotations
 
+import os
 import struct
 import uuid
 from io import BytesIO
@@ -40,7 +41,7 @@ from ._common import (
 )
 from ._registry import register_reader, register_writer
 
-__all__ = ["read_datx", "encode_datx", "check_hdf5"]
+__all__ = ["read_datx", "read_in_process", "encode_datx", "check_hdf5"]
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _DBL_MAX = float(np.finfo(np.float64).max)
@@ -361,6 +362,38 @@ def read_datx(source: Source) -> Surface:
         Heights in m (NaN where the value equals ``No Data`` or is not finite),
         pixel sizes in m from the X/Y converters (None when 0), ``x0, y0`` from the
         ``Coordinates`` attribute.
+
+    Notes
+    -----
+    libhdf5 can hang or crash on damaged files, so by default the file is parsed
+    in a helper process (see ``servosurf.io._hdf5_worker``) and such failures
+    become :class:`~servosurf.errors.CorruptedFileError`. Set the environment
+    variable ``SERVOSURF_HDF5_ISOLATION=0`` to parse in-process.
+    """
+    name = source.name
+    check_hdf5(source.data, name)
+    if os.environ.get("SERVOSURF_HDF5_ISOLATION", "1") != "0":
+        from ._hdf5_worker import run_isolated
+
+        z, dx, dy, x0, y0, md = run_isolated(source.data, name)
+        return make_surface(z, dx, dy, md, name, x0=x0, y0=y0)
+    return read_in_process(source)
+
+
+def read_in_process(source: Source) -> Surface:
+    """Parse a ``.datx`` file with h5py in this process (see :func:`read_datx`).
+
+    Only for trusted files: libhdf5 may hang or crash on damaged ones.
+
+    Parameters
+    ----------
+    source : Source
+        Loaded file.
+
+    Returns
+    -------
+    Surface
+        As :func:`read_datx`.
     """
     import h5py
 
