@@ -24,6 +24,7 @@ __all__ = ["main", "build_parser", "COMMANDS"]
 COMMANDS = (
     "machines",
     "noise",
+    "psd",
     "paper",
     "identify",
     "simulate",

@@ -185,3 +185,26 @@ def test_vibration_stream_memmap(tmp_path, loop):
     vs = VibrationStream(loop, seed=1, taps=4096)
     mm = vs.to_memmap(tmp_path / "v.npy", 50_000, chunk=12_345)
     np.testing.assert_allclose(mm[:], vs.segment(0, 50_000).astype(np.float32))
+
+
+def test_psd_command_round_trip(tmp_path, capsys):
+    import json
+
+    from servosurf.cli import main
+
+    rng = np.random.default_rng(5)
+    fs = 199.6e3
+    rec = rng.normal(0, 1e-9, (32, 4096))
+    np.savez(tmp_path / "r.npz", records=rec, fs_hz=fs)
+    assert main(["psd", str(tmp_path / "r.npz"), "--out", str(tmp_path / "ws.csv"),
+                 "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    f, p = read_psd_csv(tmp_path / "ws.csv")
+    np.testing.assert_allclose(np.mean(p), 2 * 1e-18 / fs, rtol=0.03)
+    np.testing.assert_allclose(data["rms_from_psd"], 1e-9, rtol=0.03)
+    # a machine file can use it
+    model = PSDModel(csv=str(tmp_path / "ws.csv"))
+    assert evaluate_psd(model, np.array([1e3]))[0] > 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,v\n0,1\n")
+    assert main(["psd", str(bad), "--out", str(tmp_path / "x.csv")]) == 1

@@ -43,6 +43,13 @@ def test_windowed_samples_are_a_subset_of_the_full_path():
     assert rel.min() < lo and rel.max() > hi
 
 
+def test_count_samples_matches_sample():
+    spec = small_facing()
+    for kw in ({}, {"field": spec.field}, {"field": spec.field, "reach": 5e-6},
+               {"t_window": (0.5, 0.7)}):
+        assert tp.count_samples(spec, **kw) == tp.sample(spec, **kw).n
+
+
 def test_t_window_and_reach():
     spec = small_facing()
     p = tp.sample(spec, t_window=(1.0, 2.0))

@@ -364,6 +364,7 @@ class FRFBlock(Block):
 
     def __init__(self, ctx: Context, name: str, kind: str, freq: np.ndarray,
                  frf: np.ndarray, p0: ModelParams) -> None:
+        super().__init__(recording=name, kind=kind, domain="frf", n=0)
         self.ctx = ctx
         fs = ctx.case.fs
         keep = freq < 0.5 * fs
@@ -383,8 +384,7 @@ class FRFBlock(Block):
         d2 = np.concatenate([np.diff(r[:m], 2), np.diff(r[m:], 2)])
         sig = 1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0)
         self.sigma = max(float(sig), FRF_FLOOR)
-        super().__init__(recording=name, kind=kind, domain="frf",
-                         n=2 * int(self.freq.size) - (1 if self.gain else 0))
+        self.n = 2 * int(self.freq.size) - (1 if self.gain else 0)
 
     def model(self, p: ModelParams) -> np.ndarray:
         """Model FRF at the block's frequencies under ``p``."""

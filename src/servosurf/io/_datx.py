@@ -41,14 +41,13 @@ from ._common import (
 )
 from ._registry import register_reader, register_writer
 
-__all__ = ["read_datx", "read_in_process", "encode_datx", "check_hdf5"]
+__all__ = ["read_datx", "encode_datx", "check_hdf5"]
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _DBL_MAX = float(np.finfo(np.float64).max)
 _META_KEY = "servosurf.metadata"
 _ORIGIN_KEY = "servosurf.origin"  # exact (x0, y0) in m
-_ATTR_PREFIX = "Data Context.Data Attributes."
-_MAX_METADATA_ROWS = 100_000
+_ATTR_PREFIX = "Data Context.Data Attributes."  # Mx attribute-name prefix
 
 
 # ------------------------------------------------------------ HDF5 guards
@@ -145,185 +144,93 @@ _H5_ERRORS: tuple[type[BaseException], ...] = (
 )
 
 
-def _s(value: Any) -> str | None:
-    """First element of a string attribute as ``str`` (None when not a string)."""
-    v = value
-    while isinstance(v, np.ndarray):
-        if v.size == 0:
+def _first(v: Any) -> Any:
+    while isinstance(v, list):
+        if not v:
             return None
-        v = v.flat[0]
-    if isinstance(v, bytes):
-        return v.decode("utf-8", errors="replace")
-    if isinstance(v, str):
-        return v
-    return None
+        v = v[0]
+    return v
 
 
-def _f(value: Any) -> float | None:
-    """First element of a numeric attribute as ``float`` (None otherwise)."""
-    v = value
-    if isinstance(v, np.ndarray):
-        if v.size == 0 or v.dtype.kind not in "fiu":
-            return None
-        v = v.flat[0]
-    if isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool):
+def _s(v: Any) -> str | None:
+    """First element of a plain attribute value as ``str`` (None otherwise)."""
+    v = _first(v)
+    return v if isinstance(v, str) else None
+
+
+def _f(v: Any) -> float | None:
+    """First element of a plain attribute value as ``float`` (None otherwise)."""
+    v = _first(v)
+    if isinstance(v, int | float) and not isinstance(v, bool):
         return float(v)
     return None
 
 
-def _attr(obj: Any, key: str) -> Any:
-    try:
-        if key not in obj.attrs:
-            return None
-        return obj.attrs[key]
-    except _H5_ERRORS:
-        return None
+def _rec(v: Any) -> dict[str, Any]:
+    """First record of a plain compound attribute (empty dict otherwise)."""
+    v = _first(v)
+    return v if isinstance(v, dict) else {}
 
 
-def _converter(obj: Any, key: str) -> tuple[str | None, str | None, np.ndarray | None]:
-    """(Category, BaseUnit, Parameters) of a converter attribute, None when absent."""
-    v = _attr(obj, key)
-    if not isinstance(v, np.ndarray) or v.dtype.names is None or v.size == 0:
-        if isinstance(v, np.void) and v.dtype.names is not None:
-            rec = v
-        else:
-            return None, None, None
-    else:
-        rec = v.flat[0]
-    names = rec.dtype.names or ()
-    cat = _s(rec["Category"]) if "Category" in names else None
-    unit = _s(rec["BaseUnit"]) if "BaseUnit" in names else None
-    params = None
-    if "Parameters" in names:
-        p = rec["Parameters"]
-        try:
-            params = np.asarray(p, dtype=np.float64).ravel()
-        except (TypeError, ValueError):
-            params = None
-    return cat, unit, params
+def _converter(attrs: dict[str, Any], key: str) -> tuple[str | None, list[float]]:
+    """(BaseUnit, Parameters) of a converter attribute."""
+    rec = _rec(attrs.get(key))
+    params = rec.get("Parameters")
+    if not isinstance(params, list):
+        params = []
+    params = [p for p in params if isinstance(p, float)]
+    return _s(rec.get("BaseUnit")), params
 
 
-def _metadata_table(f: Any) -> dict[str, dict[str, str]]:
-    ds = f.get("MetaData")
-    if ds is None or not hasattr(ds, "dtype") or ds.dtype.names is None:
-        return {}
-    if not {"Source", "Link", "Destination"} <= set(ds.dtype.names) or ds.ndim != 1:
-        return {}
-    if ds.shape[0] > _MAX_METADATA_ROWS:
-        return {}
-    table: dict[str, dict[str, str]] = {}
-    for row in ds[()]:
-        src, link, dest = _s(row["Source"]), _s(row["Link"]), _s(row["Destination"])
-        if src is None or link is None or dest is None:
-            continue
-        table.setdefault(src, {})[link] = dest
-    return table
-
-
-def _locate(f: Any, name: str) -> tuple[Any, Any]:
-    """Return (surface dataset, attribute group or None)."""
-    import h5py
-
-    table = _metadata_table(f)
-    surface = attrs_group = None
-    meas = table.get("Root", {}).get("Measurement")
-    if meas is not None:
-        links = table.get(meas, {})
-        s = links.get("Surface")
-        if s is not None:
-            path = table.get(s, {}).get("Path", s if s.startswith("/") else None)
-            if path is not None and isinstance(f.get(path), h5py.Dataset):
-                surface = f[path]
-        a = links.get("Attributes")
-        if a is not None and isinstance(f.get(a), h5py.Group):
-            attrs_group = f[a]
-    if surface is None:
-        for path in ("/Measurement/Surface", "/Data/Surface"):
-            obj = f.get(path)
-            if isinstance(obj, h5py.Dataset):
-                surface = obj
-                break
-            if isinstance(obj, h5py.Group):
-                sets = [obj[k] for k in obj if isinstance(obj.get(k), h5py.Dataset)]
-                if sets:
-                    surface = sets[0]
-                    break
-    if surface is None:
-        raise corrupt(
-            name, "HDF5 file has no surface dataset",
-            "a /MetaData link Root -> Measurement -> Surface, /Measurement/Surface or "
-            "/Data/Surface/<dataset>",
-        )
-    if attrs_group is None:
-        grp = f.get("Attributes")
-        if isinstance(grp, h5py.Group):
-            subs = [k for k in grp if k != "System" and isinstance(grp.get(k), h5py.Group)]
-            if subs:
-                attrs_group = grp[subs[-1]]
-    return surface, attrs_group
-
-
-def _find_attr(group: Any, suffix: str) -> Any:
-    """Attribute of ``group`` whose name ends with ``suffix`` (first match)."""
-    if group is None:
-        return None
-    try:
-        keys = list(group.attrs.keys())
-    except _H5_ERRORS:
-        return None
-    for prefix in (_ATTR_PREFIX, "Surface " + _ATTR_PREFIX, ""):
-        if prefix + suffix in keys:
-            return _attr(group, prefix + suffix)
-    return None
-
-
-def _group_metadata(group: Any) -> dict[str, Any]:
+def _group_metadata(g: dict[str, Any]) -> dict[str, Any]:
     md: dict[str, Any] = {}
-    if group is None:
+    if not g:
         return md
-    stype = _s(_find_attr(group, "System Type"))
-    md["instrument"] = f"ZYGO {stype}".strip() if stype is not None else "ZYGO"
-    serial = _s(_find_attr(group, "System Serial Number"))
+    stype = _s(g.get("System Type"))
+    sw = _s(g.get("Software Info Name"))
+    if stype:
+        md["instrument"] = f"ZYGO {stype}"
+    elif sw and sw.startswith(("MetroPro", "Mx")):
+        md["instrument"] = "ZYGO"
+    serial = _s(g.get("System Serial Number"))
     if serial:
         md["serial"] = serial
-    obj = _s(_find_attr(group, "Objective"))
+    obj = _s(g.get("Objective"))
     if obj:
         md["objective"] = obj
-    sw = _s(_find_attr(group, "Software Info Name"))
-    ver = _s(_find_attr(group, "Software Info Version"))
+    ver = _s(g.get("Software Info Version"))
     if sw:
         md["software"] = f"{sw} {ver}".strip() if ver else sw
-    comment = _s(_find_attr(group, "Comment"))
+    comment = _s(g.get("Comment"))
     if comment:
         md["comment"] = comment
-    wl = _f(_find_attr(group, "Wavelength:Value"))
+    wl = _f(g.get("Wavelength:Value"))
     if wl is not None and np.isfinite(wl) and wl > 0:
         md["wavelength"] = wl
-    ts = _find_attr(group, "Time Stamp")
-    if isinstance(ts, np.ndarray) and ts.dtype.names and "time" in ts.dtype.names and ts.size:
-        date = iso_date(float(ts.flat[0]["time"]))
-        if date:
-            md["date"] = date
-    extra = parse_metadata_json(_s(_attr(group, _META_KEY)) or "")
+    t = _f(_rec(g.get("Time Stamp")).get("time"))
+    date = iso_date(t) if t is not None else None
+    if date:
+        md["date"] = date
+    extra = parse_metadata_json(_s(g.get(_META_KEY)) or "")
     if extra:
         md.update(extra)
     return md
 
 
-def _height_factor(ds: Any, unit: str | None, name: str) -> float:
-    """Metres per stored value."""
-    _, zunit, zparams = _converter(ds, "Z Converter")
-    unit = unit or zunit
+def _height_factor(attrs: dict[str, Any], name: str) -> tuple[float, str]:
+    """(metres per stored value, unit name)."""
+    zunit, zparams = _converter(attrs, "Z Converter")
+    unit = _s(attrs.get("Unit")) or zunit
     if unit is None:
         raise corrupt(name, "surface dataset has no 'Unit' attribute", "a height unit")
     if unit.strip().lower() in ("fringes", "fringe", "waves"):
-        wl = _f(_attr(ds, "Wavelength"))
-        isf = _f(_attr(ds, "Interferometric Scale Factor"))
-        obl = _f(_attr(ds, "Obliquity Factor"))
-        if zparams is not None and zparams.size >= 4:
-            wl = wl if wl is not None else float(zparams[1])
-            isf = isf if isf is not None else float(zparams[2])
-            obl = obl if obl is not None else float(zparams[3])
+        wl = _f(attrs.get("Wavelength"))
+        isf = _f(attrs.get("Interferometric Scale Factor"))
+        obl = _f(attrs.get("Obliquity Factor"))
+        if len(zparams) >= 4:
+            wl = wl if wl is not None else zparams[1]
+            isf = isf if isf is not None else zparams[2]
+            obl = obl if obl is not None else zparams[3]
         for label, v in (("Wavelength", wl), ("Interferometric Scale Factor", isf),
                          ("Obliquity Factor", obl)):
             if v is None or not np.isfinite(v) or v <= 0:
@@ -332,14 +239,65 @@ def _height_factor(ds: Any, unit: str | None, name: str) -> float:
                     "a positive wavelength (m), scale factor and obliquity",
                 )
         assert wl is not None and isf is not None and obl is not None
-        return wl * isf * obl
+        return wl * isf * obl, unit
     try:
-        return length_factor(unit)
+        return length_factor(unit), unit
     except UnitError:
         raise unsupported(
             name, f"surface unit is {unit!r}",
             "Fringes, NanoMeters, MicroMeters, MilliMeters or Meters",
         ) from None
+
+
+def _is_length(unit: str) -> bool:
+    try:
+        length_factor(unit)
+    except UnitError:
+        return False
+    return True
+
+
+def _interpret(ex: dict[str, Any], name: str) -> Surface:
+    """Build the Surface from :func:`_hdf5.extract` output."""
+    attrs = ex["attrs"]
+    factor, unit = _height_factor(attrs, name)
+    z = ex["z"]
+    invalid = ~np.isfinite(z)
+    nd = _f(attrs.get("No Data"))
+    if nd is not None:
+        invalid |= z == nd
+        if nd >= 0.5 * _DBL_MAX:
+            invalid |= z >= nd
+    z = z * factor
+    z[invalid] = np.nan
+    pixel = []
+    for axis in ("X", "Y"):
+        base, params = _converter(attrs, f"{axis} Converter")
+        value = None
+        if len(params) >= 2:
+            value = params[1]
+            if base is not None and base.lower() not in ("pixels", "pixel") and _is_length(base):
+                value *= length_factor(base)
+        pixel.append(check_pixel_size(value, name, f"{axis} Converter", zero_means_uncalibrated=True))
+    dx, dy = pixel
+    x0 = y0 = 0.0
+    coords = _rec(attrs.get("Coordinates"))
+    col, row = _f(coords.get("ColumnStart")), _f(coords.get("RowStart"))
+    if col is not None and dx:
+        x0 = col * dx
+    if row is not None and dy:
+        y0 = row * dy
+    origin = attrs.get(_ORIGIN_KEY)
+    if isinstance(origin, list) and len(origin) == 2 and all(isinstance(v, float) for v in origin):
+        x0, y0 = origin
+    md = _group_metadata(ex["group"])
+    if "wavelength" not in md:
+        wl = _f(attrs.get("Wavelength"))
+        if wl is not None and np.isfinite(wl) and wl > 0:
+            md["wavelength"] = wl
+    md["source_format"] = "datx"
+    md["datx"] = {"unit": unit, "dataset": ex["dataset"]}
+    return make_surface(z, dx, dy, md, name, x0=x0, y0=y0)
 
 
 @register_reader(
@@ -365,110 +323,26 @@ def read_datx(source: Source) -> Surface:
 
     Notes
     -----
-    libhdf5 can hang or crash on damaged files, so by default the file is parsed
-    in a helper process (see ``servosurf.io._hdf5_worker``) and such failures
-    become :class:`~servosurf.errors.CorruptedFileError`. Set the environment
-    variable ``SERVOSURF_HDF5_ISOLATION=0`` to parse in-process.
+    libhdf5 can hang or crash on damaged files, so the file is parsed in a helper
+    process (see ``servosurf.io._hdf5``) and such failures become
+    :class:`~servosurf.errors.CorruptedFileError`. Set the environment variable
+    ``SERVOSURF_HDF5_ISOLATION=0`` to parse in-process (trusted files only).
     """
-    name = source.name
-    check_hdf5(source.data, name)
-    if os.environ.get("SERVOSURF_HDF5_ISOLATION", "1") != "0":
-        from ._hdf5_worker import run_isolated
-
-        z, dx, dy, x0, y0, md = run_isolated(source.data, name)
-        return make_surface(z, dx, dy, md, name, x0=x0, y0=y0)
-    return read_in_process(source)
-
-
-def read_in_process(source: Source) -> Surface:
-    """Parse a ``.datx`` file with h5py in this process (see :func:`read_datx`).
-
-    Only for trusted files: libhdf5 may hang or crash on damaged ones.
-
-    Parameters
-    ----------
-    source : Source
-        Loaded file.
-
-    Returns
-    -------
-    Surface
-        As :func:`read_datx`.
-    """
-    import h5py
+    from ._hdf5 import ExtractError, extract, extract_isolated
 
     name = source.name
     check_hdf5(source.data, name)
     try:
-        with h5py.File(BytesIO(source.data), "r") as f:
-            return _read_open(f, source)
+        if os.environ.get("SERVOSURF_HDF5_ISOLATION", "1") != "0":
+            ex = extract_isolated(source.data, name)
+        else:
+            ex = extract(source.data)
+    except ExtractError as exc:
+        raise corrupt(name, *exc.args) from None
     except _H5_ERRORS as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise corrupt(name, f"HDF5 structure is damaged ({msg})", "a readable .datx file") from None
-
-
-def _read_open(f: Any, source: Source) -> Surface:
-    name = source.name
-    ds, group = _locate(f, name)
-    if ds.ndim != 2 or ds.dtype.kind not in "fiu" or 0 in ds.shape:
-        raise corrupt(
-            name, f"surface dataset {ds.name} has shape {ds.shape} and type {ds.dtype}",
-            "a non-empty 2-D numeric array",
-        )
-    nbytes = int(np.prod(ds.shape, dtype=np.float64)) * 8
-    if nbytes > max(1100 * len(source.data), 1 << 20):
-        raise corrupt(
-            name, f"surface dataset claims {ds.shape[0]}x{ds.shape[1]} values in a "
-            f"{len(source.data)}-byte file", "a size the file can hold",
-        )
-    z = np.asarray(ds[()], dtype=np.float64)
-    unit = _s(_attr(ds, "Unit"))
-    factor = _height_factor(ds, unit, name)
-    invalid = ~np.isfinite(z)
-    nd = _f(_attr(ds, "No Data"))
-    if nd is not None:
-        invalid |= z == nd
-        if nd >= 0.5 * _DBL_MAX:
-            invalid |= z >= nd
-    z = z * factor
-    z[invalid] = np.nan
-    pixel = []
-    for axis in ("X", "Y"):
-        cat, base, params = _converter(ds, f"{axis} Converter")
-        value = None
-        if params is not None and params.size >= 2:
-            value = float(params[1])
-            if base is not None and base.lower() not in ("pixels", "pixel"):
-                value *= length_factor(base) if _is_length(base) else 1.0
-        pixel.append(check_pixel_size(value, name, f"{axis} Converter", zero_means_uncalibrated=True))
-    dx, dy = pixel
-    x0 = y0 = 0.0
-    coords = _attr(ds, "Coordinates")
-    if isinstance(coords, np.ndarray) and coords.dtype.names and coords.size:
-        rec = coords.flat[0]
-        if "ColumnStart" in rec.dtype.names and dx:
-            x0 = float(rec["ColumnStart"]) * dx
-        if "RowStart" in rec.dtype.names and dy:
-            y0 = float(rec["RowStart"]) * dy
-    origin = _attr(ds, _ORIGIN_KEY)
-    if isinstance(origin, np.ndarray) and origin.dtype.kind == "f" and origin.size == 2:
-        x0, y0 = (float(v) for v in origin)
-    md = _group_metadata(group)
-    if "wavelength" not in md:
-        wl = _f(_attr(ds, "Wavelength"))
-        if wl is not None and np.isfinite(wl) and wl > 0:
-            md["wavelength"] = wl
-    md["source_format"] = "datx"
-    md["datx"] = {"unit": unit, "dataset": ds.name}
-    return make_surface(z, dx, dy, md, name, x0=x0, y0=y0)
-
-
-def _is_length(unit: str) -> bool:
-    try:
-        length_factor(unit)
-    except UnitError:
-        return False
-    return True
+    return _interpret(ex, name)
 
 
 # ------------------------------------------------------------------ writer

@@ -225,6 +225,13 @@ def _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
     -------
     float
         Height in m, ``+inf`` when the interval is a gap or the point is beyond the arc.
+
+    Notes
+    -----
+    h = z + R - sqrt(R**2 - dr**2) - c(dr / R): the round-nose edge of the seed
+    paper's tool (Table 2, R = 0.5 mm) as a circular arc in the radial-axial plane,
+    not a sphere (a sphere misses the lenslet envelope by micrometres because the
+    lenslet curvature along the cut is close to R; PAPER_NOTES.md).
     """
     inv_dt = pts[i, 3]
     if inv_dt == 0.0:

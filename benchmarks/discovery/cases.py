@@ -1,0 +1,724 @@
+"""Case generator of the blind discrepancy-discovery benchmark.
+
+A case is a folder with ``manifest.toml`` and recordings in the formats ``servosurf
+diagnose`` reads (nothing else: no hidden metadata). The truth of each case goes to
+the sealed key file (:mod:`generate`), never into the case folder.
+
+Campaign (DISCOVERY.md section 5.1, at the seed paper's 0.175 kg / 468 Hz set-up,
+cutting the 5 um lenslets of ``toolpaths/lenslet_5um.toml``):
+
+* ``idle.npz``: 32 idle following-error records of 4096 samples (paper 4.1);
+* ``aircut.npz``: following error of the lenslet command with the tool retracted;
+* ``cut.csv``: force and following error while cutting;
+* ``frf_ol.csv``, ``frf_cl.csv``, ``frf_force.csv``: open-loop (V/V), closed-loop
+  (m/m) and force (m/N) FRFs with 1 % complex measurement noise;
+* ``surface.npz``: the interferometer field around the middle-ring lenslet;
+* ``ring{k}.npz``: circumferential profiles along each ring of lenslets.
+
+Noise: the machine's stochastic disturbances (sensor, current, base) realised per
+record through the true loop (generator's own synthesis), 2 mN force-sensor noise,
+0.1 nm white interferometer noise. Effects are injected with the diagnosis
+simulator's knobs where the physics is the same; the surface map is swept with the
+project's kernel (:func:`servosurf.toolpath.sweep`, waviness through
+:class:`~servosurf.toolpath.Tool`), and the out-of-catalogue nonlinearities run in
+this file's own loop kernel. Effect strengths are set by the effect-to-noise ratio
+(ENR): RMS of the effect in a recording over the noise RMS of that recording,
+maximised over recordings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from servosurf.diagnose._sim import CaseModel, ModelParams
+from servosurf.servo import load_machine, write_frf_csv
+from servosurf.toolpath import Tool, load_toolpath, sample, sweep
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parents[1]
+TOOLPATH = REPO / "toolpaths" / "lenslet_5um.toml"
+
+MASS = 0.175
+BANDWIDTH = 468.0
+FRF_NOISE = 0.01
+FORCE_NOISE = 2e-3
+INSTRUMENT_NOISE = 0.1e-9
+
+CAMPAIGNS = {
+    "full": dict(idle_records=32, idle_len=4096, air_len=32768, cut_len=32768,
+                 frf_n=300, surface=(480, 640), rings=3, profile_dx=2e-6),
+    "quick": dict(idle_records=16, idle_len=4096, air_len=16384, cut_len=16384,
+                  frf_n=200, surface=(300, 300), rings=2, profile_dx=4e-6),
+}
+
+#: Catalogue effects the generator injects (every module of the catalogue).
+EFFECTS = ("structural-mode", "loop-delay", "base-vibration-lines", "thermal-drift",
+           "flexure-stiffness-nonlinearity", "force-constant-position",
+           "amplifier-saturation", "sensor-nonlinearity", "sensor-noise-shape",
+           "tool-edge-waviness", "tool-radius-error", "cutting-force-coefficient",
+           "spindle-axial-error", "elastic-recovery")
+#: Effects outside the catalogue.
+OOL = ("bouc-wen-hysteresis", "quadratic-damping", "coulomb-friction",
+       "opposite-sign-mode", "sensor-1/f-noise")
+
+
+# ------------------------------------------------------------------ the case model
+_CASE = {}
+
+
+def base_case() -> CaseModel:
+    """The nominal case (cached per process)."""
+    if "case" not in _CASE:
+        m = load_machine().with_moving_mass(MASS).with_bandwidth(BANDWIDTH)
+        _CASE["case"] = CaseModel(m, load_toolpath(TOOLPATH))
+    return _CASE["case"]
+
+
+# ------------------------------------------------------------------ OOL kernel
+@njit(cache=False)
+def _ool_loop(ad, bd, cx, ac, bc, cc, dc, sens, nd, frac, r, kt, radius, chip, kind,
+              par, bl, out):
+    """Loop with an out-of-catalogue force on the coil carrier (m2).
+
+    kind 1: Bouc-Wen hysteresis ``F = -par0 z``, ``z' = v - par1 |v| z - par2 v |z|``;
+    kind 2: quadratic damping ``F = -par0 |v| v``; kind 3: Coulomb friction
+    ``F = -par0 tanh(v / par1)``. ``cx`` rows: x1, y, I, x2, x3, v2.
+    """
+    n = r.shape[0]
+    na = ad.shape[0]
+    nc = ac.shape[0]
+    xa = np.zeros(na)
+    xn = np.zeros(na)
+    xc = np.zeros(nc)
+    xcn = np.zeros(nc)
+    reg = np.zeros(nd + 2)
+    zbw = 0.0
+    dt = 1.0 / 199.6e3
+    for k in range(n):
+        x1 = 0.0
+        ym = 0.0
+        v2 = 0.0
+        for j in range(na):
+            x1 += cx[0, j] * xa[j]
+            ym += cx[1, j] * xa[j]
+            v2 += cx[5, j] * xa[j]
+        e = sens * (r[k] - ym)
+        u = dc * e
+        for j in range(nc):
+            u += cc[j] * xc[j]
+        for i in range(nc):
+            acc = bc[i, 0] * e
+            for j in range(nc):
+                acc += ac[i, j] * xc[j]
+            xcn[i] = acc
+        for i in range(nc):
+            xc[i] = xcn[i]
+        for j in range(nd + 1, 0, -1):
+            reg[j] = reg[j - 1]
+        reg[0] = u
+        ua = (1.0 - frac) * reg[nd] + frac * reg[nd + 1]
+        f = 0.0
+        if chip == 1:
+            d = -x1
+            if d > 0.0:
+                if d > radius:
+                    d = radius
+                h = radius - d
+                f = kt * (radius * radius * math.acos(h / radius)
+                          - h * math.sqrt(max(2.0 * radius * d - d * d, 0.0)))
+        fx = 0.0
+        if kind == 1:
+            fx = -par[0] * zbw
+            zbw += dt * (v2 - par[1] * abs(v2) * zbw - par[2] * v2 * abs(zbw))
+        elif kind == 2:
+            fx = -par[0] * abs(v2) * v2
+        elif kind == 3:
+            fx = -par[0] * math.tanh(v2 / par[1])
+        ieq = fx / bl
+        for i in range(na):
+            acc = bd[i, 0] * ua + bd[i, 1] * ieq + bd[i, 2] * f
+            for j in range(na):
+                acc += ad[i, j] * xa[j]
+            xn[i] = acc
+        for i in range(na):
+            xa[i] = xn[i]
+        out[0, k] = x1
+        out[1, k] = r[k] - ym
+        out[2, k] = f
+
+
+def ool_simulate(case: CaseModel, ool: dict, ref: np.ndarray, chip: bool) -> dict:
+    """Deterministic loop run with an out-of-catalogue nonlinearity."""
+    ad, bd, cx, nd, frac = case.discrete(ModelParams())
+    ac, bc, cc, dc = case.controller()
+    cx6 = np.zeros((6, cx.shape[1]))
+    cx6[:5] = cx
+    cx6[5, 7] = 1.0  # v2 (mechanics velocity of the carrier)
+    kind = {"bouc-wen-hysteresis": 1, "quadratic-damping": 2,
+            "coulomb-friction": 3}[ool["kind"]]
+    par = np.asarray(ool["par"], dtype=float)
+    out = np.zeros((3, ref.size))
+    m = case.machine
+    _ool_loop(ad, bd, cx6, ac, bc, cc, dc, m.sensor.sensitivity, nd, frac,
+              np.ascontiguousarray(ref, dtype=float), case.kt(ModelParams()),
+              case.tool_radius(), 1 if chip else 0, kind, par,
+              m.actuator.force_constant, out)
+    return {"tool": out[0], "fe": out[1], "force": out[2]}
+
+
+# ------------------------------------------------------------------ noise
+def _source_psds(case: CaseModel, p: ModelParams, f: np.ndarray, ool: dict | None):
+    w = case.disturbance_psds(p, f)
+    if ool and ool["kind"] == "sensor-1/f-noise":
+        w["sensor_noise"] = w["sensor_noise"] + ool["par"][0] ** 2 * 1000.0 / f
+    return w
+
+
+def noise_records(case: CaseModel, p: ModelParams, n: int, rng, *, count: int = 1,
+                  ool=None, outputs=("fe",)) -> dict:
+    """Periodic Gaussian realisations of the stochastic errors, plus the lines.
+
+    Each source gets random Fourier coefficients of variance ``W n fs / 2`` above
+    ``fs / 4096`` and goes through the true closed loop; lines get a random phase
+    per record.
+    """
+    fs = case.fs
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    band = (f >= fs / 4096 * (1 - 1e-9)) & (f < fs / 2)
+    fb = f[band]
+    ps = case.paths(p, fb)
+    w = _source_psds(case, p, fb, ool)
+    inp = {"sensor_noise": "sensor_noise", "current_noise": "current_noise",
+           "base": "base"}
+    out = {o: np.zeros((count, n)) for o in outputs}
+    t = np.arange(n) / fs
+    for c in range(count):
+        spec = {o: np.zeros(f.size, dtype=complex) for o in outputs}
+        for name, wk in w.items():
+            g = (rng.standard_normal(fb.size) + 1j * rng.standard_normal(fb.size)) \
+                / math.sqrt(2.0)
+            x = np.sqrt(wk * n * fs / 2.0) * g
+            for o in outputs:
+                spec[o][band] += ps[(inp[name], o)] * x
+        for o in outputs:
+            out[o][c] = np.fft.irfft(spec[o], n)
+        if len(p.line_frequencies):
+            f0 = np.asarray(p.line_frequencies)
+            h = case.paths(p, f0)
+            for j in range(f0.size):
+                ph = rng.uniform(0, 2 * np.pi)
+                for o in outputs:
+                    hh = h[("base", o)][j]
+                    out[o][c] += p.line_amplitudes[j] * abs(hh) * np.cos(
+                        2 * np.pi * f0[j] * t + ph + np.angle(hh))
+    return out
+
+
+def fe_noise_rms(case: CaseModel, p: ModelParams, n: int = 4096, ool=None,
+                 output: str = "fe") -> float:
+    """RMS (m) of the stochastic part of ``output`` (no lines)."""
+    fs = case.fs
+    f = np.fft.rfftfreq(n, 1.0 / fs)[1:]
+    f = f[(f >= fs / 4096 * (1 - 1e-9)) & (f < fs / 2)]
+    ps = case.paths(p, f)
+    w = _source_psds(case, p, f, ool)
+    inp = {"sensor_noise": "sensor_noise", "current_noise": "current_noise",
+           "base": "base"}
+    s = sum(wk * np.abs(ps[(inp[k], output)]) ** 2 for k, wk in w.items())
+    return float(math.sqrt(np.sum(s) * fs / n))
+
+
+# ------------------------------------------------------------------ geometry
+def surface_field(campaign: dict):
+    """The map's field: the toolpath's 20X field (cropped in quick runs)."""
+    spec = load_toolpath(TOOLPATH)
+    ny, nx = campaign["surface"]
+    return dataclasses.replace(spec.field, nx=nx, ny=ny)
+
+
+def path_terms(p: ModelParams, t, theta, z):
+    """Outside-the-loop tool terms (generator's own formulas)."""
+    dz = -(p.sensor_a2 * z**2 + p.sensor_a3 * z**3)
+    if p.drift_amplitude:
+        dz = dz + p.drift_amplitude * (1 - np.exp(-t / p.drift_time_constant))
+    dz = dz + p.drift_rate * t
+    for h, a, ph in zip(p.spindle_orders, p.spindle_amplitudes, p.spindle_phases,
+                        strict=True):
+        dz = dz + a * np.cos(h * theta + ph)
+    return dz
+
+
+def waviness_tool(spec, p: ModelParams) -> Tool:
+    """The toolpath's tool with the radius error and the waviness of ``p``."""
+    from servosurf.diagnose._surface import phi_reference
+
+    tool = spec.tool
+    kw = {"nose_radius": tool.nose_radius + p.radius_error}
+    if len(p.waviness) and any(p.waviness):
+        phi = np.linspace(-tool.arc_half_angle, tool.arc_half_angle, 4001)
+        ref = phi_reference(base_case())
+        u = np.clip(phi / ref, -1.5, 1.5)
+        c = np.zeros(3 + len(p.waviness))
+        c[3:] = p.waviness
+        dev = np.polynomial.legendre.legval(u, c)
+        kw["waviness_angle"] = tuple(phi)
+        kw["waviness_deviation"] = tuple(dev)
+    return dataclasses.replace(tool, **kw)
+
+
+def tool_series(case: CaseModel, p: ModelParams, ool, t_max: float) -> tuple:
+    """Deterministic tool height over [0, t_max] (steady state repeated)."""
+    from servosurf.diagnose._surface import ToolTrajectory
+
+    fs = case.fs
+    n = int(round(0.12 * fs))
+    t = np.arange(n) / fs
+    ref = case.toolpath.path.z_at(t)
+    if ool and ool["kind"] in ("bouc-wen-hysteresis", "quadratic-damping",
+                               "coulomb-friction"):
+        x1 = ool_simulate(case, ool, ref, True)["tool"]
+    else:
+        x1 = case.simulate_path(p, t)["tool"]
+    return ToolTrajectory(t, x1, 1.0 / case.toolpath.path.frequency)
+
+
+# ------------------------------------------------------------------ recordings
+def deterministic(case: CaseModel, p: ModelParams, ool, campaign: dict) -> dict:
+    """Noise-free recordings of a case (used for the data and for the ENR)."""
+    fs = case.fs
+    spec = case.toolpath
+    out = {}
+    nonlin_ool = ool and ool["kind"] in ("bouc-wen-hysteresis", "quadratic-damping",
+                                         "coulomb-friction")
+    ta = np.arange(campaign["air_len"]) / fs
+    ref = spec.path.z_at(ta)
+    if nonlin_ool:
+        out["air"] = ool_simulate(case, ool, ref, False)["fe"]
+    else:
+        out["air"] = case.simulate(p, reference=ref)["fe"]
+    tc = np.arange(campaign["cut_len"]) / fs
+    if nonlin_ool:
+        c = ool_simulate(case, ool, spec.path.z_at(tc), True)
+    else:
+        c = case.simulate_path(p, tc)
+    out["cut_fe"], out["cut_force"] = c["fe"], c["force"]
+    f = np.geomspace(20.0, 40e3, campaign["frf_n"])
+    ps = case.paths(p, f)
+    out["frf"] = {"frf_ol": (f, ps["open_loop"]),
+                  "frf_cl": (f, ps[("reference", "sensor")]),
+                  "frf_force": (f, ps[("force", "sensor")])}
+    traj = tool_series(case, p, ool, spec.path.duration)
+    out["traj"] = traj
+    return out
+
+
+def sweep_surface(case: CaseModel, p: ModelParams, traj, field, noise_fn=None):
+    """Map by the project's sweep kernel (generator path), heights in m."""
+    spec = case.toolpath
+    tool = waviness_tool(spec, p)
+    path = sample(spec, fs=case.fs, field=field, tool=tool)
+    z = traj(path.t) + path_terms(p, path.t, path.theta, traj(path.t))
+    if noise_fn is not None:
+        z = z + noise_fn(path.t)
+    path = path.with_z(z)
+    surf = sweep(path, tool, field, check=False)
+    zz = surf.z.copy()
+    if p.recovery:
+        zz = zz + p.recovery * (0.0 - zz)
+    return zz
+
+
+def ring_points(case: CaseModel, k: int, dx: float):
+    """Points of the circumferential profile along ring k (x, y, s) and its radius."""
+    spec = case.toolpath
+    r = float(spec.path.ring_radii()[k])
+    n = int(2 * math.pi * r / dx)
+    s = dx * np.arange(n)
+    th = s / r
+    return r * np.cos(th), r * np.sin(th), r
+
+
+def profile_heights(case: CaseModel, p: ModelParams, traj, x, y, noise_fn=None):
+    """Heights along a profile with the pointwise model (generator path)."""
+    from servosurf.diagnose._surface import PointSet, surface_heights
+
+    pts = PointSet(case, x, y)
+    return surface_heights(case, pts, p, traj, noise=noise_fn)
+
+
+class ToolNoise:
+    """Stochastic tool error as a function of time: one realisation per window."""
+
+    def __init__(self, case, p, rng, windows, ool=None):
+        self.parts = []
+        fs = case.fs
+        for t0, t1 in windows:
+            n = 1 << int(math.ceil(math.log2(max((t1 - t0) * fs + 64, 1024))))
+            x = noise_records(case, p, n, rng, ool=ool, outputs=("tool",))["tool"][0]
+            self.parts.append((t0 - 16 / fs, fs, x))
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        out = np.zeros(t.shape)
+        for t0, fs, x in self.parts:
+            k = (t - t0) * fs
+            sel = (k >= 0) & (k < x.size - 1)
+            out[sel] = np.interp(k[sel], np.arange(x.size), x)
+        return out
+
+
+def _field_windows(case, field):
+    """Time windows in which each ring passes the field."""
+    spec = case.toolpath
+    path = spec.path
+    x, y = field.coords()
+    th = np.arctan2(np.array([y[0], y[-1], y[0], y[-1]]),
+                    np.array([x[0], x[0], x[-1], x[-1]]))
+    w = path.angular_speed
+    t_rev = 2 * math.pi / w
+    ph = np.mod(th - path.theta0, 2 * math.pi) / w
+    lo, hi = ph.min(), ph.max()
+    if hi - lo > math.pi / w:  # wraps
+        lo, hi = 0.0, t_rev
+    return [(k * t_rev + lo - 1e-3, k * t_rev + hi + 1e-3) for k in range(path.ring_count)]
+
+
+def enr(case: CaseModel, p: ModelParams, ool, campaign: dict, nominal: dict) -> float:
+    """Effect-to-noise ratio: max over recordings of effect RMS / noise RMS."""
+    d = deterministic(case, p, ool, campaign)
+    sig_fe = fe_noise_rms(case, ModelParams())
+    vals = [float(np.sqrt(np.mean((d["air"] - nominal["air"]) ** 2))) / sig_fe,
+            float(np.sqrt(np.mean((d["cut_fe"] - nominal["cut_fe"]) ** 2))) / sig_fe,
+            float(np.sqrt(np.mean((d["cut_force"] - nominal["cut_force"]) ** 2)))
+            / FORCE_NOISE]
+    for k, (_f, h) in d["frf"].items():
+        h0 = nominal["frf"][k][1]
+        vals.append(float(np.sqrt(np.mean(np.abs(np.log(h / h0)) ** 2))) / FRF_NOISE)
+    # idle spectrum: lines and changes of the noise power
+    s1 = fe_noise_rms(case, p, ool=ool) ** 2
+    s0 = sig_fe**2
+    if len(p.line_frequencies):
+        h = case.paths(p, np.asarray(p.line_frequencies))[("base", "fe")]
+        s1 += float(np.sum((np.asarray(p.line_amplitudes) * np.abs(h)) ** 2) / 2)
+    vals.append(math.sqrt(abs(s1 - s0) / s0))
+    # maps and profiles: deterministic height change over the cut points
+    tool_sig = fe_noise_rms(case, ModelParams(), output="tool")
+    map_sig = math.sqrt(tool_sig**2 + INSTRUMENT_NOISE**2)
+    for key in ("surface", "rings"):
+        if key in nominal:
+            z0 = nominal[key]
+            z1 = _maps(case, p, ool, campaign, d["traj"])[key]
+            cut = (z0 < -EDGE) & (z1 < -EDGE)
+            if cut.any():
+                vals.append(float(np.sqrt(np.mean((z1[cut] - z0[cut]) ** 2))) / map_sig)
+    return max(vals)
+
+
+EDGE = 50e-9
+
+
+def _maps(case, p, ool, campaign, traj) -> dict:
+    out = {}
+    fld = surface_field(campaign)
+    out["surface"] = sweep_surface(case, p, traj, fld).ravel()
+    zs = []
+    for k in range(campaign["rings"]):
+        x, y, _ = ring_points(case, k, campaign["profile_dx"])
+        zs.append(profile_heights(case, p, traj, x, y))
+    out["rings"] = np.concatenate(zs)
+    return out
+
+
+def nominal_recordings(campaign: dict) -> dict:
+    """Noise-free nominal recordings (cached per process and campaign)."""
+    key = ("nominal", tuple(sorted(campaign.items())))
+    if key not in _CASE:
+        case = base_case()
+        d = deterministic(case, ModelParams(), None, campaign)
+        d.update(_maps(case, ModelParams(), None, campaign, d["traj"]))
+        _CASE[key] = d
+    return _CASE[key]
+
+
+# ------------------------------------------------------------------ effect draws
+def draw(effect: str, rng) -> tuple:
+    """Random sub-form and off-grid parameters; returns ``(knobs(s), truth(s))``.
+
+    ``knobs(s)`` gives the ModelParams keyword arguments at strength ``s`` (> 0,
+    ENR increases with s); ``truth(s)`` the parameters the diagnosis should report.
+    """
+    case = base_case()
+    m = case.machine
+    if effect == "structural-mode":
+        f = float(np.exp(rng.uniform(np.log(2500.0), np.log(30000.0))))
+        z = float(np.exp(rng.uniform(np.log(0.01), np.log(0.05))))
+        return (lambda s: {"mode_frequency": f, "mode_damping": z, "mode_gain": s},
+                lambda s: {"frequency": f, "compliance": s}, 1e-10)
+    if effect == "loop-delay":
+        sign = 1.0 if rng.uniform() < 0.75 else -1.0
+        return (lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs)
+                           if sign < 0 else s},
+                lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs)
+                           if sign < 0 else s}, 0.2 / case.fs)
+    if effect == "base-vibration-lines":
+        k = int(rng.integers(1, 4))
+        if rng.uniform() < 0.5:
+            fr = sorted(rng.choice([50.0, 100.0, 150.0, 250.0, 350.0], k,
+                                   replace=False))
+        else:
+            fr = sorted(rng.uniform(60.0, 4000.0, k))
+        rel = np.sort(rng.uniform(0.3, 1.0, k))[::-1]
+        rel[0] = 1.0
+        fr = [float(x) for x in fr]
+        order = np.argsort(-rel)
+        fr = [fr[i] for i in order]
+        rel = rel[order]
+        return (lambda s: {"line_frequencies": tuple(fr),
+                           "line_amplitudes": tuple(float(s * r) for r in rel)},
+                lambda s: {"frequency_1": fr[0], "amplitude_1": s}, 1e-9)
+    if effect == "thermal-drift":
+        form = rng.choice(["exp", "lin", "both"])
+        tau = float(rng.uniform(0.6, 3.0))
+        sg = 1.0 if rng.uniform() < 0.5 else -1.0
+
+        def kn(s):
+            return {"drift_amplitude": sg * s if form != "lin" else 0.0,
+                    "drift_time_constant": tau,
+                    "drift_rate": -sg * s / 4.0 if form != "exp" else 0.0}
+        return kn, kn, 1e-9
+    if effect == "flexure-stiffness-nonlinearity":
+        form = rng.choice(["k2", "k3", "both"])
+        sg = 1.0 if rng.uniform() < 0.7 else -1.0
+        k2 = m.mechanics.k2
+        st = 15e-6
+
+        def kn(s):
+            return {"flexure_k2": sg * s * k2 / st if form != "k3" else 0.0,
+                    "flexure_k3": sg * s * k2 / st**2 if form != "k2" else 0.0}
+        return (kn, lambda s: {"k_quadratic": kn(s)["flexure_k2"],
+                               "k_cubic": kn(s)["flexure_k3"]}, 1e-3)
+    if effect == "force-constant-position":
+        form = rng.choice(["b1", "b2", "both"])
+        sg = 1.0 if rng.uniform() < 0.5 else -1.0
+        st = 15e-6
+
+        def kn(s):
+            return {"kf_b1": sg * s / st if form != "b2" else 0.0,
+                    "kf_b2": -s / st**2 if form != "b1" else 0.0}
+        return (kn, lambda s: {"b1": kn(s)["kf_b1"], "b2": kn(s)["kf_b2"]}, 1e-3)
+    if effect == "amplifier-saturation":
+        peak = steady_peak_current(case)
+
+        def kn(s):
+            return {"max_current": peak * (1.0 - min(s, 0.95))}
+        return kn, lambda s: {"max_current": kn(s)["max_current"]}, 0.02
+    if effect == "sensor-nonlinearity":
+        form = rng.choice(["a2", "a3", "both"])
+        sg = 1.0 if rng.uniform() < 0.5 else -1.0
+        st = 10e-6
+
+        def kn(s):
+            return {"sensor_a2": sg * s / st if form != "a3" else 0.0,
+                    "sensor_a3": s / st**2 if form != "a2" else 0.0}
+        return kn, lambda s: {"a2": kn(s)["sensor_a2"], "a3": kn(s)["sensor_a3"]}, 1e-3
+    if effect == "sensor-noise-shape":
+        sn = m.disturbances.sensor_noise
+        form = rng.choice(["floor", "corner"])
+
+        def kn(s):
+            if form == "floor":
+                return {"sensor_floor": sn.floor * (1.0 + s)}
+            return {"sensor_corner": sn.corner * (1.0 + s)}
+        return (kn, lambda s: {"floor": sn.floor * (1 + s)} if form == "floor"
+                else {"corner": sn.corner * (1 + s)}, 0.1)
+    if effect == "tool-edge-waviness":
+        v = rng.normal(size=4)
+        v /= np.linalg.norm(v)
+
+        def kn(s):
+            return {"waviness": tuple(float(s * c) for c in v)}
+        return kn, lambda s: {f"p{k + 3}": float(s * v[k]) for k in range(4)}, 1e-9
+    if effect == "tool-radius-error":
+        sg = 1.0 if rng.uniform() < 0.5 else -1.0
+        return (lambda s: {"radius_error": sg * s},
+                lambda s: {"radius_error": sg * s}, 1e-6)
+    if effect == "cutting-force-coefficient":
+        sg = 1.0 if rng.uniform() < 0.5 else -1.0
+        k0 = case.specific_force
+        return (lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))},
+                lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))}, 0.01)
+    if effect == "spindle-axial-error":
+        h = int(rng.integers(1, 13))
+        ph = float(rng.uniform(-np.pi, np.pi))
+        return (lambda s: {"spindle_orders": (h,), "spindle_amplitudes": (s,),
+                           "spindle_phases": (ph,)},
+                lambda s: {"order_1": float(h), "amplitude_1": s}, 1e-9)
+    if effect == "elastic-recovery":
+        return (lambda s: {"recovery": s}, lambda s: {"recovery": s}, 1e-3)
+    raise KeyError(effect)
+
+
+def steady_peak_current(case) -> float:
+    """Peak current demand (A) of the steady lenslet cut, nominal machine."""
+    if "ipeak" not in _CASE:
+        t = np.arange(int(0.1 * case.fs)) / case.fs
+        u = case.simulate_path(ModelParams(), t)["u"]
+        _CASE["ipeak"] = float(np.max(np.abs(u[len(u) // 2:]))
+                               * case.machine.actuator.current_gain)
+    return _CASE["ipeak"]
+
+
+def draw_ool(kind: str, rng) -> tuple:
+    """Out-of-catalogue effect at strength s: ``(ool(s), knobs(s))``."""
+    case = base_case()
+    k2 = case.machine.mechanics.k2
+    if kind == "bouc-wen-hysteresis":
+        az = float(rng.uniform(2e-6, 6e-6))
+        return (lambda s: {"kind": kind, "par": [s * k2, 0.5 / az, 0.5 / az]},
+                lambda s: {}, 0.01)
+    if kind == "quadratic-damping":
+        return (lambda s: {"kind": kind, "par": [s * 100.0]}, lambda s: {}, 0.1)
+    if kind == "coulomb-friction":
+        return (lambda s: {"kind": kind, "par": [s, 1e-4]}, lambda s: {}, 1e-3)
+    if kind == "opposite-sign-mode":
+        f = float(np.exp(rng.uniform(np.log(3000.0), np.log(20000.0))))
+        z = float(rng.uniform(0.01, 0.04))
+        return (lambda s: None, lambda s: {"mode_frequency": f, "mode_damping": z,
+                                           "mode_gain": -s}, 1e-10)
+    if kind == "sensor-1/f-noise":
+        sn = case.machine.disturbances.sensor_noise
+        return (lambda s: {"kind": kind, "par": [s * sn.level]}, lambda s: {}, 1.0)
+    raise KeyError(kind)
+
+
+def scale_to_enr(target: float, make, campaign: dict, s0: float) -> float:
+    """Strength s with ENR(s) = target (secant iterations in log-log)."""
+    case = base_case()
+    nom = nominal_recordings(campaign)
+
+    def f(s):
+        p, ool = make(s)
+        if p.has_mode and not case.is_stable(p):
+            return float("inf")
+        return enr(case, p, ool, campaign, nom)
+
+    s, e = s0, f(s0)
+    for _ in range(8):
+        if not np.isfinite(e) or e <= 0:
+            s *= 0.3
+            e = f(s)
+            continue
+        if abs(math.log(e / target)) < 0.03:
+            break
+        s2 = s * (target / e)
+        e2 = f(s2)
+        if np.isfinite(e2) and e2 > 0 and abs(math.log(e2 / e)) > 1e-6:
+            slope = math.log(e2 / e) / math.log(s2 / s)
+            slope = min(max(slope, 0.3), 3.0)
+            s, e = s2, e2
+            s = s * (target / e) ** (1.0 / slope)
+            e = f(s)
+        else:
+            s, e = s2, e2
+    return s
+
+
+# ------------------------------------------------------------------ writing a case
+def write_case(folder: Path, p: ModelParams, ool, campaign: dict, seed: int) -> None:
+    """Write the recordings and the manifest of one case."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    case = base_case()
+    fs = case.fs
+    rng = np.random.default_rng(seed)
+    d = deterministic(case, p, ool, campaign)
+    # idle records
+    nr, nl = campaign["idle_records"], campaign["idle_len"]
+    idle = noise_records(case, p, nl, rng, count=nr, ool=ool)["fe"]
+    np.savez(folder / "idle.npz", fs_hz=fs, following_error_m=idle)
+    # air cut
+    na = campaign["air_len"]
+    air = d["air"] + noise_records(case, p, na, rng, ool=ool)["fe"][0]
+    cmd = case.toolpath.path.z_at(np.arange(na) / fs)
+    np.savez(folder / "aircut.npz", fs_hz=fs, following_error_m=air[None],
+             command_m=cmd[None])
+    # cut
+    nc = campaign["cut_len"]
+    fe = d["cut_fe"] + noise_records(case, p, nc, rng, ool=ool)["fe"][0]
+    fo = d["cut_force"] + FORCE_NOISE * rng.standard_normal(nc)
+    t = np.arange(nc) / fs
+    with open(folder / "cut.csv", "w") as fh:
+        fh.write("time_s,force_n,following_error_m\n")
+        np.savetxt(fh, np.column_stack([t, fo, fe]), delimiter=",", fmt="%.12g")
+    # FRFs
+    for name, (f, h) in d["frf"].items():
+        g = (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) \
+            / math.sqrt(2.0)
+        write_frf_csv(folder / f"{name}.csv", f, h * (1.0 + FRF_NOISE * g))
+    # surface and ring profiles
+    fld = surface_field(campaign)
+    noise = ToolNoise(case, p, rng, _field_windows(case, fld), ool=ool)
+    z = sweep_surface(case, p, d["traj"], fld, noise)
+    z = z + INSTRUMENT_NOISE * rng.standard_normal(z.shape)
+    np.savez(folder / "surface.npz", z=z, dx=fld.pitch_x, dy=fld.pitch_y,
+             x0=fld.x0, y0=fld.y0)
+    rec_lines = []
+    t_rev = 2 * math.pi / case.toolpath.path.angular_speed
+    for k in range(campaign["rings"]):
+        x, y, r = ring_points(case, k, campaign["profile_dx"])
+        tn = ToolNoise(case, p, rng, [(k * t_rev - 0.01, (k + 1) * t_rev + 0.01)],
+                       ool=ool)
+        zp = profile_heights(case, p, d["traj"], x, y, tn)
+        zp = zp + INSTRUMENT_NOISE * rng.standard_normal(zp.shape)
+        np.savez(folder / f"ring{k}.npz", z=zp, dx=campaign["profile_dx"])
+        rec_lines.append(f'[[recording]]\npath = "ring{k}.npz"\nkind = "profile"\n'
+                         f"radius = {r!r}\n")
+    tp = os.path.relpath(TOOLPATH, folder)
+    text = (f'[case]\nmachine = "seed-prototype"\ntoolpath = "{tp}"\n'
+            f"bandwidth = {BANDWIDTH}\nmoving-mass = {MASS}\n\n"
+            '[[recording]]\npath = "idle.npz"\nkind = "following-error"\n\n'
+            '[[recording]]\npath = "aircut.npz"\nkind = "following-error"\n\n'
+            '[[recording]]\npath = "cut.csv"\nkind = "cut"\n\n'
+            '[[recording]]\npath = "frf_ol.csv"\nkind = "frf-open-loop"\n\n'
+            '[[recording]]\npath = "frf_cl.csv"\nkind = "frf-closed-loop"\n\n'
+            '[[recording]]\npath = "frf_force.csv"\nkind = "frf-force"\n\n'
+            '[[recording]]\npath = "surface.npz"\nkind = "surface"\n\n'
+            + "\n".join(rec_lines))
+    (folder / "manifest.toml").write_text(text)
+
+
+def build(spec: dict, campaign: dict):
+    """Model of a case spec: ``(ModelParams, ool, truth)`` with strengths set.
+
+    ``spec``: ``{"effects": [name, ...], "ool": name or None, "enr": float,
+    "seed": int}``.
+    """
+    rng = np.random.default_rng(spec["seed"] + 7919)
+    knobs, truths = [], {}
+    ool_make = None
+    for name in spec["effects"]:
+        kn, tr, s0 = draw(name, rng)
+
+        def make1(s, kn=kn):
+            return ModelParams(**kn(s)), None
+        s = scale_to_enr(spec["enr"], make1, campaign, s0)
+        knobs.append(kn(s))
+        truths[name] = {k: float(v) for k, v in tr(s).items()}
+    if spec.get("ool"):
+        om, okn, s0 = draw_ool(spec["ool"], rng)
+
+        def make2(s):
+            return ModelParams(**okn(s)), om(s)
+        s = scale_to_enr(spec["enr"], make2, campaign, s0)
+        knobs.append(okn(s))
+        ool_make = om(s)
+    kw: dict = {}
+    for k in knobs:
+        kw.update(k)
+    return ModelParams(**kw), ool_make, truths
