@@ -216,7 +216,7 @@ def simulate(
             f"than {MAX_SPAN_SAMPLES}; use a smaller field or the tiled whole-part run"
         )
     t = (k0 + np.arange(n)) / fs
-    _theta, _r, z_cmd = spec.path.evaluate(t)
+    z_cmd = spec.path.z_at(t)
 
     with _progress.stage(f"deviation ({', '.join(parts) or 'none'}) over {n} samples"):
         dev: dict[str, np.ndarray] = {}
@@ -226,6 +226,7 @@ def simulate(
         base = loop.simulate(reference=ref)
         dev["tracking"] = (base["tool"] - z_cmd) if tracking else np.zeros(n)
         force = np.zeros(n)
+        # copies: the loop outputs are views of one (5, n) buffer, freed below
         fol = base["following_error"].copy()
         if "force" in parts:
             kt = workpiece.material.specific_thrust_pressure
@@ -244,10 +245,12 @@ def simulate(
                 ramp = np.clip((t - t[0]) * p.rev_per_s, 0.0, 1.0)
                 cut = loop.simulate(reference=ref, force=kt * area * ramp)
             dev["force"] = cut["tool"] - base["tool"]
-            force = cut["force"]
+            force = cut["force"].copy()
             fol = cut["following_error"].copy()
+            del cut
         else:
             dev["force"] = np.zeros(n)
+        del base
         if "vibration" in parts:
             real = realise(loop, int(n), seed=int(seed))
             dev["vibration"] = real.tool
@@ -257,7 +260,8 @@ def simulate(
         extra = np.zeros(n)
         for h in hooks:
             if hasattr(h, "path_z"):
-                extra = extra + np.asarray(h.path_z(t, _theta, _r, z_cmd), dtype=float)
+                theta, radius = spec.path.theta_at(t), spec.path.radius_at(t)
+                extra = extra + np.asarray(h.path_z(t, theta, radius, z_cmd), dtype=float)
         dev["hooks"] = extra
 
     with _progress.stage("toolpath samples over the field"):

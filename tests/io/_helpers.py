@@ -33,7 +33,7 @@ def metropro_dat(
     comment: bytes = b"synthetic",
     objective: bytes = b"50X Mirau",
 ) -> bytes:
-    """A MetroPro .dat file holding the int32 phase array ``raw`` (rows from the top)."""
+    """A MetroPro .dat file holding the int32 phase array ``raw`` (rows from top)."""
     ny, nx = raw.shape
     hsize = 4096 if header_format == 3 else 834
     h = bytearray(hsize)
@@ -81,12 +81,20 @@ def metropro_dat(
     return bytes(h) + inten + np.asarray(raw, dtype=">i4").tobytes()
 
 
-def expected_heights(raw: np.ndarray, *, phase_res: int = 1, sign: int = 0,
-                     wavelength: float = 632.8e-9, intf_scale_factor: float = 0.5,
-                     obliquity_factor: float = 1.0) -> np.ndarray:
+def expected_heights(
+    raw: np.ndarray,
+    *,
+    phase_res: int = 1,
+    sign: int = 0,
+    wavelength: float = 632.8e-9,
+    intf_scale_factor: float = 0.5,
+    obliquity_factor: float = 1.0,
+) -> np.ndarray:
     """Heights in m that a reader must return for ``raw`` (float32 header values)."""
     f32 = lambda v: float(np.float32(v))  # noqa: E731 - header fields are float32
-    scale = f32(intf_scale_factor) * f32(obliquity_factor) * f32(wavelength) / R[phase_res]
+    scale = (
+        f32(intf_scale_factor) * f32(obliquity_factor) * f32(wavelength) / R[phase_res]
+    )
     z = raw.astype(np.float64) * (-scale if sign else scale)
     z[raw >= NO_DATA] = np.nan
     return z
@@ -151,6 +159,9 @@ def zygo_xyz(z_um: np.ndarray, *, lateral_res: float = 1e-6, origin=(0, 0)) -> b
     for i in range(ny):
         for j in range(nx):
             v = z_um[i, j]
-            lines.append(f"{origin[0] + j} {origin[1] + i} " + ("No Data" if np.isnan(v) else repr(float(v))))
+            lines.append(
+                f"{origin[0] + j} {origin[1] + i} "
+                + ("No Data" if np.isnan(v) else repr(float(v)))
+            )
     lines.append("#")
     return ("\n".join(lines) + "\n").encode()

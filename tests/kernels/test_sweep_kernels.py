@@ -10,9 +10,13 @@ import textwrap
 
 import numpy as np
 import pytest
-from reference import ATOL_IDENTICAL, ATOL_REFERENCE, naive
 
 import servosurf.toolpath as tp
+
+try:  # tests/ on sys.path (rootdir-relative packages)
+    from reference import ATOL_IDENTICAL, ATOL_REFERENCE, naive
+except ImportError:  # tests/ itself is a package
+    from tests.reference import ATOL_IDENTICAL, ATOL_REFERENCE, naive
 
 # A tool whose clearance never triggers the warning on random paths.
 STEEP_TOOL = tp.Tool(clearance_angle=math.pi / 2)

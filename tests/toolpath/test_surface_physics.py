@@ -7,9 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from reference import RTOL_KINEMATIC
 
 import servosurf.toolpath as tp
+
+try:  # tests/ on sys.path (rootdir-relative packages)
+    from reference import RTOL_KINEMATIC
+except ImportError:  # tests/ itself is a package
+    from tests.reference import RTOL_KINEMATIC
 
 TOOLPATHS = Path(__file__).resolve().parents[2] / "toolpaths"
 

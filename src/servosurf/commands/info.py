@@ -1,4 +1,4 @@
-"""``servosurf info``: format, size, pixel size, height statistics and metadata of a file."""
+"""``servosurf info``: format, size, pixel size, height statistics, metadata."""
 
 from __future__ import annotations
 
@@ -7,17 +7,26 @@ from typing import Any
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
+    """Register ``servosurf info`` and its flags on ``sub``."""
     p = sub.add_parser(
-        "info", help="describe a surface or profile file (size, pixel size, Sa, Sq)",
+        "info",
+        help="describe a surface or profile file (size, pixel size, Sa, Sq)",
         description="Read a surface or profile file (MetroPro .dat/.asc, ZYGO .xyz, Mx "
-        ".datx, .x3p, .npz, Mx profile .csv) and report its format, shape, pixel size, "
-        "invalid fraction, height range, Sa and Sq over the valid pixels (about the mean, "
-        "no levelling), Sq after a least-squares plane, and its metadata. Text output "
-        "uses um and nm; --json gives SI values (m).")
+        ".datx, .x3p, .npz, Mx profile .csv) and report its format, shape, pixel "
+        "size, invalid fraction, height range, Sa and Sq over the valid pixels (about "
+        "the mean, no levelling), Sq after a least-squares plane, and its metadata. "
+        "Text output "
+        "uses um and nm; --json gives SI values (m).",
+    )
     p.add_argument("file", metavar="FILE", help="file to describe")
-    p.add_argument("--format", metavar="FMT",
-                   help="format name or suffix (default: detect from content and suffix)")
-    p.add_argument("--json", action="store_true", help="JSON output on stdout (SI units, m)")
+    p.add_argument(
+        "--format",
+        metavar="FMT",
+        help="format name or suffix (default: detect from content and suffix)",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="JSON output on stdout (SI units, m)"
+    )
     return p
 
 
@@ -32,35 +41,39 @@ def describe(obj: Any, fmt: str) -> dict[str, Any]:
     out: dict[str, Any] = {"format": fmt}
     if isinstance(obj, Profile):
         c = v - v.mean()
-        out.update({
-            "kind": "profile",
-            "points": int(obj.z.size),
-            "dx_m": obj.dx,
-            "length_m": obj.z.size * obj.dx,
-            "x0_m": obj.x0,
-            "invalid_fraction": float(1.0 - valid.mean()),
-            "z_min_m": float(v.min()),
-            "z_max_m": float(v.max()),
-            "pa_m": float(np.mean(np.abs(c))),
-            "pq_m": float(np.sqrt(np.mean(c**2))),
-        })
+        out.update(
+            {
+                "kind": "profile",
+                "points": int(obj.z.size),
+                "dx_m": obj.dx,
+                "length_m": obj.z.size * obj.dx,
+                "x0_m": obj.x0,
+                "invalid_fraction": float(1.0 - valid.mean()),
+                "z_min_m": float(v.min()),
+                "z_max_m": float(v.max()),
+                "pa_m": float(np.mean(np.abs(c))),
+                "pq_m": float(np.sqrt(np.mean(c**2))),
+            }
+        )
     else:
         ny, nx = obj.shape
-        out.update({
-            "kind": "surface",
-            "rows": ny,
-            "cols": nx,
-            "dx_m": obj.dx,
-            "dy_m": obj.dy,
-            "x0_m": obj.x0,
-            "y0_m": obj.y0,
-            "invalid_fraction": obj.invalid_fraction,
-            "z_min_m": float(v.min()),
-            "z_max_m": float(v.max()),
-            "sa_m": obj.sa(),
-            "sq_m": obj.sq(),
-            "sq_plane_m": obj.level().sq(),
-        })
+        out.update(
+            {
+                "kind": "surface",
+                "rows": ny,
+                "cols": nx,
+                "dx_m": obj.dx,
+                "dy_m": obj.dy,
+                "x0_m": obj.x0,
+                "y0_m": obj.y0,
+                "invalid_fraction": obj.invalid_fraction,
+                "z_min_m": float(v.min()),
+                "z_max_m": float(v.max()),
+                "sa_m": obj.sa(),
+                "sq_m": obj.sq(),
+                "sq_plane_m": obj.level().sq(),
+            }
+        )
     out["metadata"] = dict(obj.metadata)
     return out
 
@@ -69,21 +82,34 @@ def _text(info: dict[str, Any], path: str) -> str:
     um, nm = 1e6, 1e9
     lines = [f"{path}: {info['format']} ({info['kind']})"]
     if info["kind"] == "surface":
-        px = (f"{info['dx_m'] * um:.6g} x {info['dy_m'] * um:.6g} um"
-              if info["dx_m"] and info["dy_m"] else "uncalibrated")
-        lines.append(f"  size           {info['rows']} rows x {info['cols']} cols, pixel {px}")
+        px = (
+            f"{info['dx_m'] * um:.6g} x {info['dy_m'] * um:.6g} um"
+            if info["dx_m"] and info["dy_m"]
+            else "uncalibrated"
+        )
+        lines.append(
+            f"  size           {info['rows']} rows x {info['cols']} cols, pixel {px}"
+        )
     else:
-        lines.append(f"  size           {info['points']} points, step "
-                     f"{info['dx_m'] * um:.6g} um, length {info['length_m'] * um:.6g} um")
+        lines.append(
+            f"  size           {info['points']} points, step "
+            f"{info['dx_m'] * um:.6g} um, length {info['length_m'] * um:.6g} um"
+        )
     lines.append(f"  invalid        {info['invalid_fraction'] * 100:.2f} %")
-    lines.append(f"  height range   {info['z_min_m'] * um:.6g} .. {info['z_max_m'] * um:.6g} um")
+    lines.append(
+        f"  height range   {info['z_min_m'] * um:.6g} .. {info['z_max_m'] * um:.6g} um"
+    )
     if info["kind"] == "surface":
-        lines.append(f"  Sa / Sq        {info['sa_m'] * nm:.4f} / {info['sq_m'] * nm:.4f} nm "
-                     "(about the mean, no levelling)")
+        lines.append(
+            f"  Sa / Sq        {info['sa_m'] * nm:.4f} / {info['sq_m'] * nm:.4f} nm "
+            "(about the mean, no levelling)"
+        )
         lines.append(f"  Sq after plane {info['sq_plane_m'] * nm:.4f} nm")
     else:
-        lines.append(f"  Pa / Pq        {info['pa_m'] * nm:.4f} / {info['pq_m'] * nm:.4f} nm "
-                     "(primary profile about the mean, unfiltered)")
+        lines.append(
+            f"  Pa / Pq        {info['pa_m'] * nm:.4f} / {info['pq_m'] * nm:.4f} nm "
+            "(primary profile about the mean, unfiltered)"
+        )
     for k, v in info["metadata"].items():
         if isinstance(v, dict):
             continue
@@ -92,6 +118,7 @@ def _text(info: dict[str, Any], path: str) -> str:
 
 
 def run(args) -> int:
+    """Describe the file on stdout; return the exit status."""
     from ..io import read_any
     from ._common import print_json
 

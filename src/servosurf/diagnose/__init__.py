@@ -1,0 +1,23 @@
+"""Discrepancy discovery: locate, explain and refit what the model leaves out.
+
+``servosurf diagnose MANIFEST.toml`` compares recordings (following error, FRFs,
+cuts, surface maps, profiles) with the simulator, locates where and how surely they
+differ, ranks a catalogue of left-out physics by how well each module's signature
+matches, fits the best under a BIC-like criterion, and says ``unexplained`` when no
+module accounts for the mismatch. See ``/work/shared/DISCOVERY.md`` for the design
+and :mod:`servosurf.diagnose._diagnose` for the pipeline.
+"""
+
+from ._catalogue import CATALOGUE, Effect, catalogue_table, get_effect
+from ._diagnose import VERDICTS, Diagnosis, build_case, diagnose
+from ._locate import Mismatch, locate
+from ._manifest import KINDS, Manifest, Recording, load_manifest, read_recording
+from ._sim import CaseModel, ModelParams
+
+__all__ = [
+    "CATALOGUE", "Effect", "catalogue_table", "get_effect",
+    "VERDICTS", "Diagnosis", "build_case", "diagnose",
+    "Mismatch", "locate",
+    "KINDS", "Manifest", "Recording", "load_manifest", "read_recording",
+    "CaseModel", "ModelParams",
+]

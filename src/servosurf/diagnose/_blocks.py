@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import numpy as np
 import scipy as sp
+import scipy.sparse  # noqa: F401  (sp.sparse)
 
 from ._sim import CaseModel, ModelParams
 
@@ -561,8 +562,10 @@ class PointsBlock(Block):
             d = np.diff(r0)
             sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
         self.sigma = max(float(sig), MAP_FLOOR)
-        # bin-mean covariance: tool vibration + instrument / count, per segment
+        # bin-mean covariance: tool vibration + instrument / count, per segment;
+        # whitening by the block-diagonal inverse Cholesky factor (sparse)
         self.segments = []
+        self.wbins = None
         if nb:
             order = np.argsort(tb)
             gaps = np.nonzero(np.diff(tb[order]) > 0.5e-3)[0] + 1
@@ -576,6 +579,10 @@ class PointsBlock(Block):
                     ch = np.linalg.cholesky(c + np.eye(seg.size) * 1e-6 * np.trace(c)
                                             / seg.size)
                 self.segments.append((seg, ch))
+            inv = [sp.linalg.solve_triangular(ch, np.eye(seg.size), lower=True)
+                   for seg, ch in self.segments]
+            self.seg_index = np.concatenate([seg for seg, _ in self.segments])
+            self.wbins = sp.sparse.block_diag(inv, format="csr")
         wx = self._whiten(X)
         q, _ = np.linalg.qr(wx)
         self.q = q
@@ -599,8 +606,7 @@ class PointsBlock(Block):
             mb /= np.maximum(cnt, 1)[:, None]
             within = (rr[cut] - mb[b]) / self.sigma
             parts.append(within)
-            for seg, ch in self.segments:
-                parts.append(sp.linalg.solve_triangular(ch, mb[seg], lower=True))
+            parts.append(np.asarray(self.wbins @ mb[self.seg_index]))
         out = np.concatenate(parts, axis=0)
         return out if two else out[:, 0]
 
@@ -609,7 +615,7 @@ class PointsBlock(Block):
 
         def run():
             return surface_heights(self.ctx.case, self.pts, p, self.ctx.trajectory(p))
-        return self.ctx.memo((p.key(self.tags), "pts", self.recording), run)
+        return self.ctx.memo((p.key(self.tags), "pts", id(self)), run)
 
     def predict_all(self, p: ModelParams) -> np.ndarray:
         """Model heights at every point of the recording (m)."""

@@ -123,7 +123,7 @@ class Effect:
     #: recalibration modules are nuisance-like: reported apart
     recalibration = False
 
-    def n_params(self) -> int:
+    def n_params(self, cfg: Config | None = None) -> int:
         """Parameters counted by the selection criterion per term."""
         return len(self.params)
 
@@ -147,7 +147,8 @@ class Effect:
         """Model with a new term started from the linear coefficients."""
         raise NotImplementedError  # pragma: no cover
 
-    def free(self, p: ModelParams, slot: int, loc: Locations) -> list[Free]:
+    def free(self, p: ModelParams, slot: int, loc: Locations,
+             cfg: Config | None = None) -> list[Free]:
         """Free parameters of term ``slot`` for the nonlinear fit."""
         raise NotImplementedError  # pragma: no cover
 
@@ -222,7 +223,7 @@ class StructuralMode(Effect):
         return p.replace(mode_frequency=cfg.values["f"], mode_damping=cfg.values["z"],
                          mode_gain=g)
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_f("mode_frequency", 100.0, 0.45 * loc.fs, True),
                 _f("mode_damping", 1e-3, 0.5, True),
                 _f("mode_gain", 1e-16, 1e-5, True)]
@@ -265,7 +266,7 @@ class LoopDelay(Effect):
         d = cfg.values["d"] / loc.fs * float(np.clip(coefs[0], 0.05, 4.0))
         return p.replace(extra_delay=d)
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_f("extra_delay", -loc.nominal_delay / loc.fs, 20.0 / loc.fs)]
 
     def report(self, p, slot, loc):
@@ -318,7 +319,7 @@ class BaseLines(Effect):
         a = loc.line_probe(cfg.values["f"]) * math.sqrt(max(float(coefs[0]), 0.01))
         return self._add(p, cfg.values["f"], a)
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         f = p.line_frequencies[slot]
         df = 1.5 * loc.fs / loc.record_length
         return [_tuple_free("line_frequencies", slot, max(f - df, 1.0), f + df,
@@ -358,23 +359,42 @@ class ThermalDrift(Effect):
         return p.drift_amplitude != 0.0 or p.drift_rate != 0.0
 
     def configs(self, loc, p):
-        return [Config(f"tau {t:g} s", {"tau": t}) for t in self.taus]
+        out = [Config("linear", {"form": "lin", "tau": 1.0})]
+        for t in self.taus:
+            out.append(Config(f"saturating, tau {t:g} s", {"form": "exp", "tau": t}))
+            out.append(Config(f"both, tau {t:g} s", {"form": "both", "tau": t}))
+        return out
+
+    def n_params(self, cfg=None):
+        if cfg is None:
+            return 3
+        return {"lin": 1, "exp": 2, "both": 3}[cfg.values["form"]]
 
     def columns(self, p, cfg, loc):
-        return [(p.replace(drift_amplitude=1e-9, drift_time_constant=cfg.values["tau"]),
-                 1e-9),
-                (p.replace(drift_rate=1e-9, drift_time_constant=cfg.values["tau"]),
-                 1e-9)]
+        form, tau = cfg.values["form"], cfg.values["tau"]
+        out = []
+        if form != "lin":
+            out.append((p.replace(drift_amplitude=1e-9, drift_time_constant=tau), 1e-9))
+        if form != "exp":
+            out.append((p.replace(drift_rate=1e-9, drift_time_constant=tau), 1e-9))
+        return out
 
     def start(self, p, cfg, coefs, loc):
-        return p.replace(drift_amplitude=1e-9 * float(coefs[0]),
-                         drift_time_constant=cfg.values["tau"],
-                         drift_rate=1e-9 * float(coefs[1]))
+        form, tau = cfg.values["form"], cfg.values["tau"]
+        c = list(coefs)
+        a = 1e-9 * float(c.pop(0)) if form != "lin" else 0.0
+        b = 1e-9 * float(c.pop(0)) if form != "exp" else 0.0
+        return p.replace(drift_amplitude=a, drift_time_constant=tau, drift_rate=b)
 
-    def free(self, p, slot, loc):
-        return [_f("drift_amplitude", -1e-5, 1e-5), _f("drift_time_constant", 0.02,
-                                                       1e3, True),
-                _f("drift_rate", -1e-5, 1e-5)]
+    def free(self, p, slot, loc, cfg=None):
+        form = "both" if cfg is None else cfg.values["form"]
+        out = []
+        if form != "lin":
+            out += [_f("drift_amplitude", -1e-5, 1e-5),
+                    _f("drift_time_constant", 0.02, 1e3, True)]
+        if form != "exp":
+            out.append(_f("drift_rate", -1e-5, 1e-5))
+        return out
 
     def report(self, p, slot, loc):
         return {"amplitude": p.drift_amplitude, "time_constant": p.drift_time_constant,
@@ -383,8 +403,54 @@ class ThermalDrift(Effect):
     def remove(self, p, slot):
         return p.replace(drift_amplitude=0.0, drift_rate=0.0, drift_time_constant=1.0)
 
+class _PairEffect(Effect):
+    """A module with two linear coefficients; configurations pick the sub-form.
 
-class FlexureNonlinearity(Effect):
+    Configurations ``first``, ``second`` and ``both`` let the selection criterion
+    prefer the simpler sub-form (one coefficient) when it suffices.
+    """
+
+    attrs: tuple[str, str] = ("", "")
+    labels: tuple[str, str] = ("", "")
+    bound = 1e5
+
+    def _probes(self, loc) -> tuple[float, float]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def active(self, p):
+        return getattr(p, self.attrs[0]) != 0.0 or getattr(p, self.attrs[1]) != 0.0
+
+    def configs(self, loc, p):
+        return [Config(self.labels[0], {"which": (0,)}),
+                Config(self.labels[1], {"which": (1,)}),
+                Config("both", {"which": (0, 1)})]
+
+    def n_params(self, cfg=None):
+        return 2 if cfg is None else len(cfg.values["which"])
+
+    def columns(self, p, cfg, loc):
+        pr = self._probes(loc)
+        return [(p.replace(**{self.attrs[i]: getattr(p, self.attrs[i]) + pr[i]}), pr[i])
+                for i in cfg.values["which"]]
+
+    def start(self, p, cfg, coefs, loc):
+        pr = self._probes(loc)
+        kw = {a: 0.0 for a in self.attrs}
+        for c, i in zip(coefs, cfg.values["which"], strict=True):
+            kw[self.attrs[i]] = pr[i] * float(c)
+        return p.replace(**kw)
+
+    def free(self, p, slot, loc, cfg=None):
+        pr = self._probes(loc)
+        which = (0, 1) if cfg is None else cfg.values["which"]
+        return [_f(self.attrs[i], -self.bound * pr[i], self.bound * pr[i])
+                for i in which]
+
+    def remove(self, p, slot):
+        return p.replace(**{a: 0.0 for a in self.attrs})
+
+
+class FlexureNonlinearity(_PairEffect):
     name = "flexure-stiffness-nonlinearity"
     title = "Flexure stiffness nonlinearity"
     physics = ("Large-deflection stiffening of the flexure bearing: extra force "
@@ -399,35 +465,18 @@ class FlexureNonlinearity(Effect):
     tags = ("nonlin",)
     params = (ParamDoc("k_quadratic", "N/m^2", "quadratic flexure stiffness k2q"),
               ParamDoc("k_cubic", "N/m^3", "cubic flexure stiffness k3"))
-
-    def active(self, p):
-        return p.flexure_k2 != 0.0 or p.flexure_k3 != 0.0
+    attrs = ("flexure_k2", "flexure_k3")
+    labels = ("quadratic", "cubic")
 
     def _probes(self, loc):
         s = loc.stroke
         return 1e-3 * loc.k2 / s, 1e-3 * loc.k2 / s**2
 
-    def columns(self, p, cfg, loc):
-        a, b = self._probes(loc)
-        return [(p.replace(flexure_k2=p.flexure_k2 + a), a),
-                (p.replace(flexure_k3=p.flexure_k3 + b), b)]
-
-    def start(self, p, cfg, coefs, loc):
-        a, b = self._probes(loc)
-        return p.replace(flexure_k2=a * float(coefs[0]), flexure_k3=b * float(coefs[1]))
-
-    def free(self, p, slot, loc):
-        a, b = self._probes(loc)
-        return [_f("flexure_k2", -1e5 * a, 1e5 * a), _f("flexure_k3", -1e5 * b, 1e5 * b)]
-
     def report(self, p, slot, loc):
         return {"k_quadratic": p.flexure_k2, "k_cubic": p.flexure_k3}
 
-    def remove(self, p, slot):
-        return p.replace(flexure_k2=0.0, flexure_k3=0.0)
 
-
-class ForceConstantPosition(Effect):
+class ForceConstantPosition(_PairEffect):
     name = "force-constant-position"
     title = "Force constant depends on position, B*l(x)"
     physics = ("The coil leaves the uniform gap field: Kf(x2) = Kf0 (1 + b1 x2 + "
@@ -441,30 +490,15 @@ class ForceConstantPosition(Effect):
     tags = ("nonlin",)
     params = (ParamDoc("b1", "1/m", "linear position coefficient of Kf"),
               ParamDoc("b2", "1/m^2", "quadratic position coefficient of Kf"))
-
-    def active(self, p):
-        return p.kf_b1 != 0.0 or p.kf_b2 != 0.0
+    attrs = ("kf_b1", "kf_b2")
+    labels = ("odd (b1)", "even (b2)")
+    bound = 300.0
 
     def _probes(self, loc):
         return 1e-3 / loc.stroke, 1e-3 / loc.stroke**2
 
-    def columns(self, p, cfg, loc):
-        a, b = self._probes(loc)
-        return [(p.replace(kf_b1=p.kf_b1 + a), a), (p.replace(kf_b2=p.kf_b2 + b), b)]
-
-    def start(self, p, cfg, coefs, loc):
-        a, b = self._probes(loc)
-        return p.replace(kf_b1=a * float(coefs[0]), kf_b2=b * float(coefs[1]))
-
-    def free(self, p, slot, loc):
-        a, b = self._probes(loc)
-        return [_f("kf_b1", -300 * a, 300 * a), _f("kf_b2", -300 * b, 300 * b)]
-
     def report(self, p, slot, loc):
         return {"b1": p.kf_b1, "b2": p.kf_b2}
-
-    def remove(self, p, slot):
-        return p.replace(kf_b1=0.0, kf_b2=0.0)
 
 
 class AmplifierSaturation(Effect):
@@ -494,7 +528,7 @@ class AmplifierSaturation(Effect):
     def start(self, p, cfg, coefs, loc):
         return p.replace(max_current=cfg.values["i"])
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_f("max_current", 1e-4, 1e3, True)]
 
     def report(self, p, slot, loc):
@@ -504,7 +538,7 @@ class AmplifierSaturation(Effect):
         return p.replace(max_current=math.inf)
 
 
-class SensorNonlinearity(Effect):
+class SensorNonlinearity(_PairEffect):
     name = "sensor-nonlinearity"
     title = "Capacitive-sensor nonlinearity"
     physics = ("The reading is y = x + a2 x^2 + a3 x^3; the loop makes the reading "
@@ -520,31 +554,15 @@ class SensorNonlinearity(Effect):
     tags = ("path",)
     params = (ParamDoc("a2", "1/m", "quadratic sensor coefficient"),
               ParamDoc("a3", "1/m^2", "cubic sensor coefficient"))
-
-    def active(self, p):
-        return p.sensor_a2 != 0.0 or p.sensor_a3 != 0.0
+    attrs = ("sensor_a2", "sensor_a3")
+    labels = ("quadratic (a2)", "cubic (a3)")
+    bound = 1e4
 
     def _probes(self, loc):
         return 1e-4 / loc.stroke, 1e-4 / loc.stroke**2
 
-    def columns(self, p, cfg, loc):
-        a, b = self._probes(loc)
-        return [(p.replace(sensor_a2=p.sensor_a2 + a), a),
-                (p.replace(sensor_a3=p.sensor_a3 + b), b)]
-
-    def start(self, p, cfg, coefs, loc):
-        a, b = self._probes(loc)
-        return p.replace(sensor_a2=a * float(coefs[0]), sensor_a3=b * float(coefs[1]))
-
-    def free(self, p, slot, loc):
-        a, b = self._probes(loc)
-        return [_f("sensor_a2", -1e4 * a, 1e4 * a), _f("sensor_a3", -1e4 * b, 1e4 * b)]
-
     def report(self, p, slot, loc):
         return {"a2": p.sensor_a2, "a3": p.sensor_a3}
-
-    def remove(self, p, slot):
-        return p.replace(sensor_a2=0.0, sensor_a3=0.0)
 
 
 class SensorNoiseShape(Effect):
@@ -587,7 +605,7 @@ class SensorNoiseShape(Effect):
                          sensor_corner=co * (1.0 + 0.05 * float(np.clip(coefs[1], -10,
                                                                          10))))
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_f("sensor_floor", 1e-16, 1e-8, True),
                 _f("sensor_corner", 100.0, 0.5 * loc.fs, True)]
 
@@ -630,7 +648,7 @@ class ToolEdgeWaviness(Effect):
     def start(self, p, cfg, coefs, loc):
         return p.replace(waviness=tuple(1e-9 * np.asarray(coefs, dtype=float)))
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_tuple_free("waviness", k, -1e-6, 1e-6, name=f"p{k + 3}")
                 for k in range(4)]
 
@@ -665,7 +683,7 @@ class ToolRadiusError(Effect):
     def start(self, p, cfg, coefs, loc):
         return p.replace(radius_error=1e-6 * float(coefs[0]))
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_f("radius_error", -2e-4, 2e-4)]
 
     def report(self, p, slot, loc):
@@ -701,7 +719,7 @@ class CuttingForceCoefficient(Effect):
         return p.replace(specific_force=loc.specific_force
                          * (1 + 0.01 * float(np.clip(coefs[0], -90, 500))))
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_f("specific_force", 1e6, 1e12, True)]
 
     def report(self, p, slot, loc):
@@ -728,7 +746,7 @@ class SpindleAxialError(Effect):
               ParamDoc("phase_k", "rad", "phase of term k"))
     max_terms = 4
 
-    def n_params(self):
+    def n_params(self, cfg=None):
         return 2
 
     def active(self, p):
@@ -756,7 +774,7 @@ class SpindleAxialError(Effect):
         return self._add(p, cfg.values["h"], 1e-9 * math.hypot(c1, c2),
                          math.atan2(-c2, c1))
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_tuple_free("spindle_amplitudes", slot, 0.0, 1e-5,
                             name=f"amplitude_{slot + 1}"),
                 _tuple_free("spindle_phases", slot, -4 * math.pi, 4 * math.pi,
@@ -800,7 +818,7 @@ class ElasticRecovery(Effect):
     def start(self, p, cfg, coefs, loc):
         return p.replace(recovery=1e-3 * float(coefs[0]))
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         return [_f("recovery", -0.2, 0.2)]
 
     def report(self, p, slot, loc):
@@ -850,7 +868,7 @@ class Recalibration(Effect):
             kw[a] = v * (1 + (s - 1) * float(np.clip(c, -20, 20)))
         return p.replace(**kw)
 
-    def free(self, p, slot, loc):
+    def free(self, p, slot, loc, cfg=None):
         out = []
         for a in self._attrs:
             v = self._nom(loc, a)

@@ -290,6 +290,8 @@ def _locations(case: CaseModel, blocks, mism: list[Mismatch], ctx: Context) -> L
                 j = int(np.argmax(sm))
                 if sm[j] > 4:
                     modes.append(float(b.freq[j]))
+    for b in blocks:
+        orders += list(getattr(b, "order_candidates", []))
     uniq = []
     for f in modes:
         if all(abs(math.log(f / g)) > 0.03 for g in uniq):
@@ -420,6 +422,13 @@ def diagnose(manifest: str | Path | Manifest, *, progress=None,
         On a bad manifest or recording.
     """
     man = manifest if isinstance(manifest, Manifest) else load_manifest(manifest)
+    from ._threads import single_blas_thread
+
+    with single_blas_thread():
+        return _diagnose(man, progress=progress, effects=effects, max_terms=max_terms)
+
+
+def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
     for rec in man.recordings:
         _KIND_OF[rec.name] = rec.kind
     case = build_case(man)
@@ -428,6 +437,8 @@ def diagnose(manifest: str | Path | Manifest, *, progress=None,
     blocks0 = _make_blocks(man, ctx, p0)
     refs = _refs(case)
     mism = locate(blocks0, p0, refs)
+    if progress:
+        progress(f"located {len(mism)} mismatches")
     loc = _locations(case, blocks0, mism, ctx)
     effs = list(effects) if effects is not None else list(CATALOGUE)
     eng = Engine(blocks0, loc, effs, lambda p: _rebuild(blocks0, ctx, man, p))

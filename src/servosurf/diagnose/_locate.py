@@ -67,14 +67,21 @@ class Mismatch:
                 **({"details": self.details} if self.details else {})}
 
 
-def _sig(p_corr: float) -> float:
-    return float(-math.log10(max(min(p_corr, 1.0), 1e-300)))
+def _chi2_logsf(x, dof):
+    """log10 of the upper tail of chi2(dof) at x, finite in the far tail.
 
-
-def _chi2_logsf(x: float, dof: float) -> float:
-    """log10 of the upper tail of chi2(dof) at x, stable in the far tail."""
-    v = sp.stats.chi2.logsf(x, dof)
-    return float(v / math.log(10.0))
+    Where scipy's ``logsf`` underflows, the Wilson-Hilferty normal approximation
+    gives the order of magnitude.
+    """
+    x = np.asarray(x, dtype=float)
+    v = np.asarray(sp.stats.chi2.logsf(x, dof), dtype=float)
+    bad = ~np.isfinite(v)
+    if np.any(bad):
+        k = np.broadcast_to(np.asarray(dof, dtype=float), x.shape)[bad]
+        z = ((x[bad] / k) ** (1 / 3) - (1 - 2 / (9 * k))) / np.sqrt(2 / (9 * k))
+        v[bad] = sp.stats.norm.logsf(z)
+    out = v / math.log(10.0)
+    return float(out) if out.ndim == 0 else out
 
 
 def third_octaves(fmin: float, fmax: float) -> np.ndarray:
@@ -132,7 +139,7 @@ def _spectral(b: SpectralBlock, p: ModelParams, refs: dict) -> list[Mismatch]:
     out += _bands(edges, stat, dof, nt, b.recording, "spectrum", "band-power",
                   "band", lower=True)
     # lines: per-bin chi2(2R)
-    lp = sp.stats.chi2.logsf(2 * R * u, 2 * R) / math.log(10.0) + math.log10(u.size)
+    lp = _chi2_logsf(2 * R * u, 2 * R) + math.log10(u.size)
     sig = np.nonzero(lp < math.log10(ALPHA))[0]
     df = b.fs / b.nsamp
     for k in _peaks(sig, u):
@@ -152,12 +159,21 @@ def _peaks(sig: np.ndarray, val: np.ndarray) -> list[int]:
     return [int(r[np.argmax(val[r])]) for r in runs]
 
 
-def _fundamental(x: np.ndarray, fs: float) -> float:
+def _fundamental(x: np.ndarray, fs: float, hint: float = 0.0) -> float:
+    """Fundamental frequency (Hz) of a command: the hint (FTS frequency) when the
+    spectral peak is within two bins of it, else the interpolated peak."""
     if x is None or not np.any(x):
         return 0.0
-    X = np.abs(np.fft.rfft(x - x.mean()))
+    X = np.abs(np.fft.rfft((x - x.mean()) * np.hanning(x.size)))
     k = int(np.argmax(X[1:])) + 1
-    return k * fs / x.size
+    df = fs / x.size
+    if hint > 0 and abs(k * df - hint) <= 2 * df:
+        return hint
+    if 1 <= k < X.size - 1:
+        a, b, c = np.log(X[k - 1] + 1e-300), np.log(X[k]), np.log(X[k + 1] + 1e-300)
+        den = a - 2 * b + c
+        k = k + (0.5 * (a - c) / den if den != 0 else 0.0)
+    return k * df
 
 
 def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mismatch]:
@@ -190,7 +206,7 @@ def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mism
                                         f"{f0:.4g} Hz command ({f[j]:.1f} Hz)", -lp,
                                         "harmonic", {"frequency_hz": float(f[j]),
                                                      "harmonic": int(k)}))
-        lp = sp.stats.chi2.logsf(e, 2) / math.log(10.0) + math.log10(e.size)
+        lp = _chi2_logsf(e, 2) + math.log10(e.size)
         sig = np.nonzero(lp < math.log10(ALPHA))[0]
         for k in _peaks(sig, e)[:8]:
             fk = float(f[k])
@@ -206,7 +222,7 @@ def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mism
         m = n // nw
         if m >= 2:
             en = (wt[: m * nw] ** 2).reshape(m, nw).sum(axis=1)
-            lp = sp.stats.chi2.logsf(en, nw) / math.log(10.0) + math.log10(m)
+            lp = _chi2_logsf(en, nw) + math.log10(m)
             j = int(np.argmin(lp))
             if lp[j] < math.log10(ALPHA):
                 t0 = b.records[i].get("t0", 0.0) + j * nw / b.fs
@@ -225,7 +241,7 @@ def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mism
                 sums = np.bincount(ph, weights=wt[: ph.size], minlength=nph)
                 cnt = np.bincount(ph, minlength=nph)
                 z2 = sums**2 / np.maximum(cnt, 1)
-                lp = sp.stats.chi2.logsf(z2, 1) / math.log(10.0) + math.log10(nph)
+                lp = _chi2_logsf(z2, 1) + math.log10(nph)
                 j = int(np.argmin(lp))
                 if lp[j] < math.log10(ALPHA):
                     out.append(Mismatch(b.recording, dom, f"locked to the command "
@@ -307,32 +323,35 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
             out.append(Mismatch(b.recording, dom, f"{label}: RMS x"
                                 f"{math.sqrt(float(v @ v) / dof):.3g} of the noise",
                                 -lp, "part", {}))
-    # integer spindle orders on the along-cut residual (unwhitened, per time bin)
-    if n_cut and b.nb > 8:
-        r = b.nuisance_fit(p)[b.cut]
-        bins = b.bins[b.cut]
-        mb = np.bincount(bins, weights=r, minlength=b.nb) / np.maximum(b.counts, 1)
-        th = np.bincount(bins, weights=b.pts.theta[b.cut], minlength=b.nb) \
-            / np.maximum(b.counts, 1)
-        span = np.ptp(np.unwrap(np.sort(th)))
+    # integer spindle orders: GLS test of cos/sin(h theta) templates (chi2(2))
+    if n_cut:
+        th = b.pts.theta
+        span = float(np.ptp(np.unwrap(np.sort(th[b.cut]))))
         hmax = 40
         if span > 0.5:
-            var = float(np.var(mb))
-            res = []
+            cols = np.zeros((th.size, 2 * hmax))
             for h in range(1, hmax + 1):
-                a = np.column_stack([np.cos(h * th), np.sin(h * th), np.ones_like(th)])
-                c, *_ = np.linalg.lstsq(a, mb, rcond=None)
-                res.append((h, math.hypot(c[0], c[1])))
-            amps = np.array([v for _, v in res])
-            z = amps**2 * mb.size / 4 / max(var, 1e-300)
-            lp = sp.stats.chi2.logsf(2 * z, 2) / math.log(10.0) + math.log10(hmax)
-            for h in np.argsort(lp)[:3]:
-                if lp[h] < math.log10(ALPHA):
+                cols[b.cut, 2 * h - 2] = np.cos(h * th[b.cut])
+                cols[b.cut, 2 * h - 1] = np.sin(h * th[b.cut])
+            wc = b._whiten(cols)
+            wc = wc - b.q @ (b.q.T @ wc)
+            lam = np.zeros(hmax)
+            amp = np.zeros(hmax)
+            for h in range(hmax):
+                t2 = wc[:, 2 * h:2 * h + 2]
+                c, *_ = np.linalg.lstsq(t2, w, rcond=None)
+                lam[h] = float(np.sum((t2 @ c) ** 2))
+                amp[h] = math.hypot(c[0], c[1])
+            lp = _chi2_logsf(lam, 2) + math.log10(hmax)
+            for h in np.argsort(lp)[:4]:
+                sig = bool(lp[h] < math.log10(ALPHA))
+                if sig:
                     out.append(Mismatch(b.recording, dom, f"spindle order {h + 1} "
-                                        f"(amplitude {amps[h] * 1e9:.3g} nm)",
+                                        f"(amplitude {amp[h] * 1e9:.3g} nm)",
                                         -float(lp[h]), "spindle-order",
                                         {"order": int(h + 1),
-                                         "amplitude_m": float(amps[h])}))
+                                         "amplitude_m": float(amp[h])}))
+            b.order_candidates = [int(k + 1) for k in np.argsort(lp)[:4]]
     return out
 
 
@@ -362,7 +381,7 @@ def locate(blocks, p: ModelParams, refs: dict[str, float]) -> list[Mismatch]:
             out += _timeblock(b, p, refs, refs.get("FTS", 0.0))
         elif isinstance(b, TimeBlock):
             cmd = b.records[0].get("command")
-            out += _timeblock(b, p, refs, _fundamental(cmd, b.fs))
+            out += _timeblock(b, p, refs, _fundamental(cmd, b.fs, refs.get("FTS", 0.0)))
         elif isinstance(b, ForceBlock):
             out += _force(b, p)
         elif isinstance(b, FRFBlock):

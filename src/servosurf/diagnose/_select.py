@@ -33,6 +33,11 @@ __all__ = ["Engine", "Term", "Candidate"]
 SCORE_CONSTANT = 6.0
 #: Extra penalty of recalibration terms (they must clearly beat physics).
 RECAL_PENALTY = 20.0
+#: Candidates whose linear score is below this share of the leader's are not fitted.
+FIT_SHARE = 0.3
+#: Candidates whose linear score is below this are not fitted (the linearised
+#: reduction underestimates nonlinear modules a little, hence below zero).
+MIN_LINEAR_SCORE = -15.0
 
 
 @dataclass
@@ -140,9 +145,9 @@ class Engine:
         lam = float(vs @ c)
         return max(lam, 0.0), -c / d
 
-    def penalty(self, eff: Effect, n_configs: int) -> float:
+    def penalty(self, eff: Effect, n_configs: int, cfg: Config | None = None) -> float:
         """Score penalty of one term of ``eff`` with ``n_configs`` configurations."""
-        pen = eff.n_params() * math.log(max(self.n_total, 2)) \
+        pen = eff.n_params(cfg) * math.log(max(self.n_total, 2)) \
             + 2.0 * math.log(max(n_configs, 1)) + SCORE_CONSTANT
         if eff.recalibration:
             pen += RECAL_PENALTY
@@ -165,8 +170,8 @@ class Engine:
             for cfg in cfgs:
                 cols = self._templates(eff, p, cfg, base)
                 lam, coefs = self._project(cols, base)
-                out.append(Candidate(eff, cfg, lam, lam - self.penalty(eff, len(cfgs)),
-                                     coefs))
+                out.append(Candidate(eff, cfg, lam,
+                                     lam - self.penalty(eff, len(cfgs), cfg), coefs))
         out.sort(key=lambda c: -c.score)
         return out
 
@@ -174,7 +179,7 @@ class Engine:
     def _frees(self, p: ModelParams, terms: list[Term]):
         frees = []
         for t in terms:
-            frees += t.effect.free(p, t.slot, self.loc)
+            frees += t.effect.free(p, t.slot, self.loc, t.config)
         return frees
 
     def fit(self, p: ModelParams, terms: list[Term], *, max_nfev: int = 60,
@@ -228,7 +233,7 @@ class Engine:
             sol = sp.optimize.least_squares(
                 fun, np.zeros(x0.size), bounds=((lo - x0) / scale, (hi - x0) / scale),
                 method="trf", x_scale="jac", diff_step=1e-4, max_nfev=max_nfev,
-                xtol=1e-6, ftol=1e-8)
+                xtol=1e-5, ftol=1e-6)
             q = from_x(x0 + sol.x * scale)
             if self.deviance(q) <= d0:
                 return q
@@ -238,7 +243,7 @@ class Engine:
 
     def line_search_1d(self, p: ModelParams, term: Term) -> ModelParams:
         """Golden-section search on a single (log) parameter: thresholded modules."""
-        (f,) = term.effect.free(p, term.slot, self.loc)
+        (f,) = term.effect.free(p, term.slot, self.loc, term.config)
         v0 = float(f.get(p))
         a, b = math.log(v0) - 0.7, math.log(v0) + 0.7
 
@@ -272,6 +277,10 @@ class Engine:
         for _ in range(max_terms):
             d_cur = self.deviance(p)
             cands = self.screen(p, terms)
+            if progress:
+                progress(f"ranked {len(cands)} configurations; leader "
+                         + (f"{cands[0].effect.name} [{cands[0].config.label}] score "
+                            f"{cands[0].score:.1f}" if cands else "none"))
             if ranking is None:
                 ranking = cands
             self.log.append({"deviance": d_cur, "top": [
@@ -279,10 +288,14 @@ class Engine:
                 for c in cands[:8]]})
             tried = []
             seen = set()
+            top = cands[0].score if cands else 0.0
             for c in cands:
                 if len(tried) >= n_fit:
                     break
-                if c.score <= -50.0 or c.effect.name in seen:
+                if c.effect.name in seen:
+                    continue
+                # fit the best few, skipping those far behind the leader
+                if c.score <= MIN_LINEAR_SCORE or (top > 0 and c.score < FIT_SHARE * top):
                     continue
                 seen.add(c.effect.name)
                 tried.append(c)
@@ -294,10 +307,11 @@ class Engine:
                 if c.effect.name == "amplifier-saturation":
                     q = self.line_search_1d(q, tnew)
                 q = self.fit(q, terms + [tnew], only_last=True)
-                q = self.fit(q, terms + [tnew])
+                if terms:
+                    q = self.fit(q, terms + [tnew])
                 lam = d_cur - self.deviance(q)
                 n_cfg = max(len(c.effect.configs(self.loc, p)), 1)
-                score = lam - self.penalty(c.effect, n_cfg)
+                score = lam - self.penalty(c.effect, n_cfg, c.config)
                 if progress:
                     progress(f"{c.effect.name} [{c.config.label}]: dD {lam:.1f}, "
                              f"score {score:.1f}")
@@ -329,7 +343,8 @@ class Engine:
                         for k, u in enumerate(terms) if k != j]
                 q = self.fit(q, rest, max_nfev=30)
                 n_cfg = max(len(t.effect.configs(self.loc, q)), 1)
-                score = (self.deviance(q) - d_full) - self.penalty(t.effect, n_cfg)
+                score = (self.deviance(q) - d_full) - self.penalty(t.effect, n_cfg,
+                                                                   t.config)
                 if worst is None or score < worst[0]:
                     worst = (score, q, rest, t)
             if worst is not None and worst[0] < 0:
@@ -341,5 +356,5 @@ class Engine:
             q = t.effect.remove(p, t.slot)
             t.delta_deviance = self.deviance(q) - d_full
             n_cfg = max(len(t.effect.configs(self.loc, p)), 1)
-            t.score = t.delta_deviance - self.penalty(t.effect, n_cfg)
+            t.score = t.delta_deviance - self.penalty(t.effect, n_cfg, t.config)
         return p, terms

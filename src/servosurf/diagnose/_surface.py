@@ -70,6 +70,12 @@ class PointSet:
         self.half_width = spec.tool.half_width
         self.radius = spec.tool.nose_radius
         self.kind = spec.kind
+        # (point, pass) pairs the edge can reach: only those are evaluated
+        self.reach = np.abs(self.dr) <= self.half_width
+        self.flat = np.flatnonzero(self.reach)
+        self.t_r = self.t.ravel()[self.flat]
+        self.dr_r = self.dr.ravel()[self.flat]
+        self.theta_r = self.theta_pass.ravel()[self.flat]
 
     @property
     def n(self) -> int:
@@ -216,19 +222,20 @@ def surface_heights(case: CaseModel, pts: PointSet, p: ModelParams,
         Heights in m (``top`` where no pass reaches).
     """
     R = pts.radius + p.radius_error
-    z_tool = traj(pts.t)
-    zt = z_tool + path_terms(case, p, pts.t, pts.theta_pass, z_tool)
+    t = pts.t_r
+    z_tool = traj(t)
+    zt = z_tool + path_terms(case, p, t, pts.theta_r, z_tool)
     if noise is not None:
-        zt = zt + noise(pts.t)
-    dr = pts.dr
-    reach = np.abs(dr) <= pts.half_width
+        zt = zt + noise(t)
+    dr = pts.dr_r
     with np.errstate(invalid="ignore"):
         arc = R - np.sqrt(np.maximum(R * R - dr * dr, 0.0))
         if len(p.waviness):
             phi = np.arcsin(np.clip(dr / pts.radius, -1.0, 1.0))
             arc = arc - legendre_waviness(phi, p.waviness, phi_reference(case)) \
                 / np.cos(phi)
-    h = np.where(reach, zt + arc, np.inf)
+    h = np.full(pts.t.shape, np.inf)
+    h.ravel()[pts.flat] = zt + arc
     k = np.argmin(h, axis=1)
     hmin = h[np.arange(h.shape[0]), k]
     cut = hmin < top

@@ -29,7 +29,6 @@ __all__ = [
     "Source",
     "load_source",
     "corrupt",
-    "unpack_from",
     "check_pixel_size",
     "make_surface",
     "jsonable",
@@ -59,9 +58,19 @@ _MAX_DEFLATE_RATIO = 1100
 #: What :mod:`zipfile` raises on damaged archives (encrypted members raise
 #: RuntimeError, unknown compression NotImplementedError).
 _ZIP_ERRORS = (
-    zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, ValueError,
-    NotImplementedError, RuntimeError, IndexError, OverflowError, UnicodeDecodeError,
-    zlib.error, struct.error, lzma.LZMAError,
+    zipfile.BadZipFile,
+    zipfile.LargeZipFile,
+    OSError,
+    EOFError,
+    ValueError,
+    NotImplementedError,
+    RuntimeError,
+    IndexError,
+    OverflowError,
+    UnicodeDecodeError,
+    zlib.error,
+    struct.error,
+    lzma.LZMAError,
 )
 
 
@@ -142,18 +151,6 @@ def corrupt(name: str, what: str, expected: str) -> CorruptedFileError:
         Ready to raise.
     """
     return CorruptedFileError(f"{name}: {what}; expected {expected}")
-
-
-def unpack_from(fmt: str, data: bytes, offset: int, name: str, what: str) -> tuple:
-    """``struct.unpack_from`` that raises :class:`CorruptedFileError` when truncated."""
-    size = struct.calcsize(fmt)
-    if offset < 0 or offset + size > len(data):
-        raise corrupt(
-            name,
-            f"file ends at byte {len(data)} inside {what} (bytes {offset}..{offset + size})",
-            "a complete file",
-        )
-    return struct.unpack_from(fmt, data, offset)
 
 
 def check_pixel_size(
@@ -349,7 +346,9 @@ def zip_member(
     try:
         info = zf.getinfo(member)
     except KeyError:
-        raise corrupt(name, f"archive member {member!r} is missing", "it to exist") from None
+        raise corrupt(
+            name, f"archive member {member!r} is missing", "it to exist"
+        ) from None
     if expected_size is not None and info.file_size != expected_size:
         raise corrupt(
             name,
@@ -371,8 +370,11 @@ def zip_member(
     try:
         return zf.read(info)
     except _ZIP_ERRORS as exc:
-        raise corrupt(name, f"archive member {member!r} cannot be read ({exc})",
-                      "an intact zip archive") from None
+        raise corrupt(
+            name,
+            f"archive member {member!r} cannot be read ({exc})",
+            "an intact zip archive",
+        ) from None
 
 
 def open_zip(data: bytes, name: str, what: str) -> zipfile.ZipFile:
@@ -384,7 +386,7 @@ def open_zip(data: bytes, name: str, what: str) -> zipfile.ZipFile:
 
 
 def as_surface(obj: Surface | Profile) -> Surface:
-    """Return a :class:`Surface`; a :class:`Profile` becomes one row with ``dy = dx``."""
+    """Return a :class:`Surface`; a :class:`Profile` becomes one row, ``dy = dx``."""
     if isinstance(obj, Surface):
         return obj
     if isinstance(obj, Profile):

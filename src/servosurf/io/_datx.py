@@ -61,8 +61,11 @@ def _superblock(data: bytes, name: str) -> tuple[int, int, int]:
     else:
         raise corrupt(name, "no HDF5 signature found", "an HDF5 (.datx) file")
     if base + 16 > len(data):
-        raise corrupt(name, f"file ends at byte {len(data)} inside the HDF5 superblock",
-                      "a complete HDF5 file")
+        raise corrupt(
+            name,
+            f"file ends at byte {len(data)} inside the HDF5 superblock",
+            "a complete HDF5 file",
+        )
     version = data[base + 8]
     if version in (0, 1):
         so, sl = data[base + 13], data[base + 14]
@@ -73,15 +76,22 @@ def _superblock(data: bytes, name: str) -> tuple[int, int, int]:
     else:
         raise corrupt(name, f"HDF5 superblock version is {version}", "0, 1, 2 or 3")
     if so not in (2, 4, 8) or sl not in (2, 4, 8):
-        raise corrupt(name, f"HDF5 offset/length sizes are {so}/{sl} bytes", "2, 4 or 8")
+        raise corrupt(
+            name, f"HDF5 offset/length sizes are {so}/{sl} bytes", "2, 4 or 8"
+        )
     if eof_at + so > len(data):
-        raise corrupt(name, f"file ends at byte {len(data)} inside the HDF5 superblock",
-                      "a complete HDF5 file")
+        raise corrupt(
+            name,
+            f"file ends at byte {len(data)} inside the HDF5 superblock",
+            "a complete HDF5 file",
+        )
     eof = int.from_bytes(data[eof_at : eof_at + so], "little")
     if eof != (1 << (8 * so)) - 1 and base + eof > len(data):
         raise corrupt(
-            name, f"file is truncated: {len(data)} bytes, but the HDF5 superblock says "
-            f"{base + eof}", f"{base + eof} bytes",
+            name,
+            f"file is truncated: {len(data)} bytes, but the HDF5 superblock says "
+            f"{base + eof}",
+            f"{base + eof} bytes",
         )
     return base, so, sl
 
@@ -114,14 +124,20 @@ def check_hdf5(data: bytes, name: str) -> None:
         if a < 0:
             return
         start = a + 4
-        if a + 8 + sl > len(data) or data[a + 4] != 1 or data[a + 5 : a + 8] != b"\0\0\0":
+        if (
+            a + 8 + sl > len(data)
+            or data[a + 4] != 1
+            or data[a + 5 : a + 8] != b"\0\0\0"
+        ):
             continue  # not a collection header (or one libhdf5 itself rejects)
         (size,) = struct.unpack_from(length_fmt, data, a + 8)
         end = a + size
         if size < 8 + sl or end > len(data):
             raise corrupt(
-                name, f"HDF5 global heap at byte {a} claims {size} bytes (file has "
-                f"{len(data)})", "a heap collection inside the file",
+                name,
+                f"HDF5 global heap at byte {a} claims {size} bytes (file has "
+                f"{len(data)})",
+                "a heap collection inside the file",
             )
         p = a + 8 + sl
         while p < end:
@@ -132,15 +148,25 @@ def check_hdf5(data: bytes, name: str) -> None:
             need = osize if idx == 0 else obj_hdr + ((osize + 7) // 8) * 8
             if need <= 0 or p + need > end:
                 raise corrupt(
-                    name, f"HDF5 global heap at byte {a}: object {idx} at byte {p} has "
-                    f"size {osize}", "objects inside their heap collection",
+                    name,
+                    f"HDF5 global heap at byte {a}: object {idx} at byte {p} has "
+                    f"size {osize}",
+                    "objects inside their heap collection",
                 )
             p += need
 
 
 _H5_ERRORS: tuple[type[BaseException], ...] = (
-    OSError, RuntimeError, ValueError, KeyError, TypeError, IndexError,
-    UnicodeDecodeError, AttributeError, OverflowError, struct.error,
+    OSError,
+    RuntimeError,
+    ValueError,
+    KeyError,
+    TypeError,
+    IndexError,
+    UnicodeDecodeError,
+    AttributeError,
+    OverflowError,
+    struct.error,
 )
 
 
@@ -231,11 +257,15 @@ def _height_factor(attrs: dict[str, Any], name: str) -> tuple[float, str]:
             wl = wl if wl is not None else zparams[1]
             isf = isf if isf is not None else zparams[2]
             obl = obl if obl is not None else zparams[3]
-        for label, v in (("Wavelength", wl), ("Interferometric Scale Factor", isf),
-                         ("Obliquity Factor", obl)):
+        for label, v in (
+            ("Wavelength", wl),
+            ("Interferometric Scale Factor", isf),
+            ("Obliquity Factor", obl),
+        ):
             if v is None or not np.isfinite(v) or v <= 0:
                 raise corrupt(
-                    name, f"surface unit is Fringes but {label} is {v!r}",
+                    name,
+                    f"surface unit is Fringes but {label} is {v!r}",
                     "a positive wavelength (m), scale factor and obliquity",
                 )
         assert wl is not None and isf is not None and obl is not None
@@ -244,7 +274,8 @@ def _height_factor(attrs: dict[str, Any], name: str) -> tuple[float, str]:
         return length_factor(unit), unit
     except UnitError:
         raise unsupported(
-            name, f"surface unit is {unit!r}",
+            name,
+            f"surface unit is {unit!r}",
             "Fringes, NanoMeters, MicroMeters, MilliMeters or Meters",
         ) from None
 
@@ -276,9 +307,17 @@ def _interpret(ex: dict[str, Any], name: str) -> Surface:
         value = None
         if len(params) >= 2:
             value = params[1]
-            if base is not None and base.lower() not in ("pixels", "pixel") and _is_length(base):
+            if (
+                base is not None
+                and base.lower() not in ("pixels", "pixel")
+                and _is_length(base)
+            ):
                 value *= length_factor(base)
-        pixel.append(check_pixel_size(value, name, f"{axis} Converter", zero_means_uncalibrated=True))
+        pixel.append(
+            check_pixel_size(
+                value, name, f"{axis} Converter", zero_means_uncalibrated=True
+            )
+        )
     dx, dy = pixel
     x0 = y0 = 0.0
     coords = _rec(attrs.get("Coordinates"))
@@ -288,7 +327,11 @@ def _interpret(ex: dict[str, Any], name: str) -> Surface:
     if row is not None and dy:
         y0 = row * dy
     origin = attrs.get(_ORIGIN_KEY)
-    if isinstance(origin, list) and len(origin) == 2 and all(isinstance(v, float) for v in origin):
+    if (
+        isinstance(origin, list)
+        and len(origin) == 2
+        and all(isinstance(v, float) for v in origin)
+    ):
         x0, y0 = origin
     md = _group_metadata(ex["group"])
     if "wavelength" not in md:
@@ -341,7 +384,9 @@ def read_datx(source: Source) -> Surface:
         raise corrupt(name, *exc.args) from None
     except _H5_ERRORS as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise corrupt(name, f"HDF5 structure is damaged ({msg})", "a readable .datx file") from None
+        raise corrupt(
+            name, f"HDF5 structure is damaged ({msg})", "a readable .datx file"
+        ) from None
     return _interpret(ex, name)
 
 
@@ -378,8 +423,13 @@ def encode_datx(surface: Surface) -> bytes:
     wl = float(wl) if isinstance(wl, int | float) and wl > 0 else float("nan")
     vstr = h5py.string_dtype("utf-8")
     astr = h5py.string_dtype("ascii")
-    conv_dt = np.dtype([("Category", astr), ("BaseUnit", astr),
-                        ("Parameters", h5py.vlen_dtype(np.float64))])
+    conv_dt = np.dtype(
+        [
+            ("Category", astr),
+            ("BaseUnit", astr),
+            ("Parameters", h5py.vlen_dtype(np.float64)),
+        ]
+    )
 
     def conv(cat: str, unit: str, params: list[float]) -> np.ndarray:
         a = np.empty(1, dtype=conv_dt)
@@ -398,7 +448,10 @@ def encode_datx(surface: Surface) -> bytes:
     bio = BytesIO()
     with h5py.File(bio, "w") as f:
         attrs = f.create_group(f"Attributes/{guid['a']}").attrs
-        for key, text in (("Objective", md.get("objective")), ("Comment", md.get("comment"))):
+        for key, text in (
+            ("Objective", md.get("objective")),
+            ("Comment", md.get("comment")),
+        ):
             if isinstance(text, str):
                 attrs[_ATTR_PREFIX + key] = s(text)
         attrs[_ATTR_PREFIX + "Software Info Name"] = s("servosurf")
@@ -421,8 +474,12 @@ def encode_datx(surface: Surface) -> bytes:
         row0 = int(round(surface.y0 / dyv)) if dyv else 0
         coords = np.array(
             [(row0, col0, nx, ny)],
-            dtype=[("RowStart", "<i4"), ("ColumnStart", "<i4"), ("Width", "<i4"),
-                   ("Height", "<i4")],
+            dtype=[
+                ("RowStart", "<i4"),
+                ("ColumnStart", "<i4"),
+                ("Width", "<i4"),
+                ("Height", "<i4"),
+            ],
         )
         ds.attrs["Coordinates"] = coords
         ds.attrs["Group Number"] = np.array([1], dtype=np.int32)

@@ -44,15 +44,33 @@ MEMORY_PER_BYTE: int = 32
 
 #: Attributes of the height dataset the reader uses.
 DATASET_ATTRS = (
-    "Unit", "No Data", "X Converter", "Y Converter", "Z Converter", "Wavelength",
-    "Interferometric Scale Factor", "Obliquity Factor", "Coordinates", "servosurf.origin",
+    "Unit",
+    "No Data",
+    "X Converter",
+    "Y Converter",
+    "Z Converter",
+    "Wavelength",
+    "Interferometric Scale Factor",
+    "Obliquity Factor",
+    "Coordinates",
+    "servosurf.origin",
 )
 #: Attribute-group keys the reader uses, by name suffix.
 GROUP_ATTRS = (
-    "System Type", "System Serial Number", "Objective", "Software Info Name",
-    "Software Info Version", "Comment", "Wavelength:Value", "Time Stamp",
+    "System Type",
+    "System Serial Number",
+    "Objective",
+    "Software Info Name",
+    "Software Info Version",
+    "Comment",
+    "Wavelength:Value",
+    "Time Stamp",
 )
-_GROUP_PREFIXES = ("Data Context.Data Attributes.", "Surface Data Context.Data Attributes.", "")
+_GROUP_PREFIXES = (
+    "Data Context.Data Attributes.",
+    "Surface Data Context.Data Attributes.",
+    "",
+)
 _OWN_KEY = "servosurf.metadata"
 _MAX_METADATA_ROWS = 100_000
 _MAX_LIST = 4096
@@ -66,7 +84,7 @@ class ExtractError(Exception):
 
 # ---------------------------------------------------------------- extraction
 def _plain(v: Any) -> Any:
-    """numpy/h5py attribute value -> str, float, int, list or dict (picklable, small)."""
+    """numpy/h5py attribute value -> str, float, int, list or dict (picklable)."""
     import numpy as np
 
     if isinstance(v, bytes):
@@ -116,7 +134,9 @@ def _metadata_table(f: Any) -> dict[str, dict[str, str]]:
         return {}
     table: dict[str, dict[str, str]] = {}
     for row in ds[()]:
-        src, link, dest = (_first_str(row[k]) for k in ("Source", "Link", "Destination"))
+        src, link, dest = (
+            _first_str(row[k]) for k in ("Source", "Link", "Destination")
+        )
         if src is not None and link is not None and dest is not None:
             table.setdefault(src, {})[link] = dest
     return table
@@ -159,7 +179,9 @@ def _locate(f: Any) -> tuple[Any, Any]:
     if group is None:
         grp = f.get("Attributes")
         if isinstance(grp, h5py.Group):
-            subs = [k for k in grp if k != "System" and isinstance(grp.get(k), h5py.Group)]
+            subs = [
+                k for k in grp if k != "System" and isinstance(grp.get(k), h5py.Group)
+            ]
             if subs:
                 group = grp[subs[-1]]
     return surface, group
@@ -247,7 +269,7 @@ def _limit_memory(extra: int) -> None:
 
 
 def main() -> None:
-    """Helper loop: answer requests from stdin on stdout until end of input."""
+    """Run the helper loop: answer requests from stdin on stdout until end of input."""
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # stray prints must not corrupt the protocol
     import h5py  # noqa: F401 - fail early (reported by the parent) if missing
@@ -298,11 +320,17 @@ class _Helper:
         self.stderr = tempfile.TemporaryFile()
         self.proc = subprocess.Popen(
             [sys.executable, "-P", os.path.abspath(__file__)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.stderr, env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.stderr,
+            env=env,
         )
         self.replies = queue.Queue()
         self.thread = threading.Thread(
-            target=_pump, args=(self.proc, self.replies), name="servosurf-hdf5", daemon=True
+            target=_pump,
+            args=(self.proc, self.replies),
+            name="servosurf-hdf5",
+            daemon=True,
         )
         self.thread.start()
         try:
@@ -372,13 +400,16 @@ class _Helper:
                 proc.stdin.write(_LEN.pack(len(data)) + data)
                 proc.stdin.flush()
             except OSError:
-                raise fail(f"the HDF5 reader process ended early ({self._stop()})") from None
+                raise fail(
+                    f"the HDF5 reader process ended early ({self._stop()})"
+                ) from None
             try:
                 reply = self.replies.get(timeout=timeout)
             except queue.Empty:
                 self._stop()
                 raise fail(
-                    f"libhdf5 did not finish parsing within {timeout:.0f} s (damaged file)"
+                    f"libhdf5 did not finish parsing within {timeout:.0f} s "
+                    "(damaged file)"
                 ) from None
             if reply is None:
                 raise fail(f"libhdf5 failed on this file ({self._stop()})")
@@ -443,7 +474,8 @@ def extract_isolated(data: bytes, name: str) -> dict[str, Any]:
     if reply[0] == "bad":
         raise ExtractError(*reply[1:])
     raise CorruptedFileError(
-        f"{name}: HDF5 structure is damaged ({reply[1]}); expected a readable .datx file"
+        f"{name}: HDF5 structure is damaged ({reply[1]}); "
+        "expected a readable .datx file"
     )
 
 

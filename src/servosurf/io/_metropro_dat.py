@@ -100,9 +100,20 @@ _FIXED_PART = 834  # all fields above live in the first 834 bytes
 _SOFTWARE = {1: "MetroPro", 2: "MetroBASIC", 3: "d2bug"}
 
 #: Metadata keys the header stores in its own fields (not repeated in the comment).
-_NATIVE_KEYS = ("wavelength", "objective", "date", "magnification", "numerical_aperture",
-                "source_format", "metropro", "instrument", "software", "comment", "zoom",
-                "serial")
+_NATIVE_KEYS = (
+    "wavelength",
+    "objective",
+    "date",
+    "magnification",
+    "numerical_aperture",
+    "source_format",
+    "metropro",
+    "instrument",
+    "software",
+    "comment",
+    "zoom",
+    "serial",
+)
 
 
 def _text(raw: bytes) -> str:
@@ -132,14 +143,21 @@ def parse_header(data: bytes, name: str) -> dict[str, Any]:
     """
     magics = ", ".join(f"0x{m:08X}" for m in MAGIC.values())
     if len(data) < 4:
-        raise corrupt(name, f"file has only {len(data)} bytes", f"a MetroPro magic number ({magics})")
+        raise corrupt(
+            name,
+            f"file has only {len(data)} bytes",
+            f"a MetroPro magic number ({magics})",
+        )
     (magic,) = struct.unpack_from(">I", data, 0)
     fmt_by_magic = {v: k for k, v in MAGIC.items()}
     if magic not in fmt_by_magic:
-        raise corrupt(name, f"magic number is 0x{magic:08X}", f"a MetroPro .dat magic ({magics})")
+        raise corrupt(
+            name, f"magic number is 0x{magic:08X}", f"a MetroPro .dat magic ({magics})"
+        )
     if len(data) < _FIXED_PART:
         raise corrupt(
-            name, f"file ends at byte {len(data)} inside the MetroPro header",
+            name,
+            f"file ends at byte {len(data)} inside the MetroPro header",
             f"at least {_FIXED_PART} header bytes",
         )
     h: dict[str, Any] = {}
@@ -149,31 +167,37 @@ def parse_header(data: bytes, name: str) -> dict[str, Any]:
     hf = fmt_by_magic[magic]
     if h["header_format"] != hf:
         raise corrupt(
-            name, f"header_format is {h['header_format']} but the magic number is that of format {hf}",
+            name,
+            f"header_format is {h['header_format']} but the magic number is that "
+            f"of format {hf}",
             f"header_format {hf}",
         )
     if h["header_size"] != HEADER_SIZE[hf]:
         raise corrupt(
-            name, f"header_size is {h['header_size']} bytes for header format {hf}",
+            name,
+            f"header_size is {h['header_size']} bytes for header format {hf}",
             f"{HEADER_SIZE[hf]} bytes",
         )
     n_int = 2 * h["ac_width"] * h["ac_height"] * h["ac_n_buckets"]
     if h["ac_n_bytes"] != n_int:
         raise corrupt(
             name,
-            f"ac_n_bytes is {h['ac_n_bytes']} for {h['ac_n_buckets']} intensity frame(s) of "
-            f"{h['ac_width']}x{h['ac_height']}",
+            f"ac_n_bytes is {h['ac_n_bytes']} for {h['ac_n_buckets']} intensity "
+            f"frame(s) of {h['ac_width']}x{h['ac_height']}",
             f"2*width*height*buckets = {n_int}",
         )
     if h["cn_width"] == 0 or h["cn_height"] == 0:
         raise corrupt(
-            name, f"phase window is {h['cn_width']}x{h['cn_height']} pixels",
+            name,
+            f"phase window is {h['cn_width']}x{h['cn_height']} pixels",
             "a non-empty connected phase array",
         )
     n_phase = 4 * h["cn_width"] * h["cn_height"]
     if h["cn_n_bytes"] != n_phase:
         raise corrupt(
-            name, f"cn_n_bytes is {h['cn_n_bytes']} for a {h['cn_width']}x{h['cn_height']} phase window",
+            name,
+            f"cn_n_bytes is {h['cn_n_bytes']} for a "
+            f"{h['cn_width']}x{h['cn_height']} phase window",
             f"4*width*height = {n_phase}",
         )
     need = h["header_size"] + h["ac_n_bytes"] + h["cn_n_bytes"]
@@ -274,16 +298,22 @@ def read_metropro_dat(source: Source) -> Surface:
     h = parse_header(source.data, source.name)
     start = h["header_size"] + h["ac_n_bytes"]
     ny, nx = h["cn_height"], h["cn_width"]
-    raw = np.frombuffer(source.data, dtype=">i4", count=nx * ny, offset=start).reshape(ny, nx)
+    raw = np.frombuffer(source.data, dtype=">i4", count=nx * ny, offset=start).reshape(
+        ny, nx
+    )
     scale = (
-        float(h["intf_scale_factor"]) * float(h["obliquity_factor"])
-        * float(h["wavelength_in"]) / PHASE_RES[h["phase_res"]]
+        float(h["intf_scale_factor"])
+        * float(h["obliquity_factor"])
+        * float(h["wavelength_in"])
+        / PHASE_RES[h["phase_res"]]
     )
     if h["sign"]:
         scale = -scale
     z = raw.astype(np.float64) * scale
     z[raw >= NO_DATA] = np.nan
-    dx = check_pixel_size(h["lateral_res"], source.name, "lateral_res", zero_means_uncalibrated=True)
+    dx = check_pixel_size(
+        h["lateral_res"], source.name, "lateral_res", zero_means_uncalibrated=True
+    )
     md = _metadata(h)
     md["source_format"] = "metropro_dat"
     org = (h["cn_org_x"] * dx, h["cn_org_y"] * dx) if dx else (0.0, 0.0)
@@ -359,21 +389,37 @@ def encode_metropro_dat(
         Non-square pixels, heights outside the int32 phase range, or bad options.
     """
     if header_format not in MAGIC:
-        raise writer_error("metropro_dat", f"header_format is {header_format!r}", "use 1, 2 or 3")
+        raise writer_error(
+            "metropro_dat", f"header_format is {header_format!r}", "use 1, 2 or 3"
+        )
     if phase_res not in PHASE_RES:
-        raise writer_error("metropro_dat", f"phase_res is {phase_res!r}", "use 0, 1 or 2")
+        raise writer_error(
+            "metropro_dat", f"phase_res is {phase_res!r}", "use 0, 1 or 2"
+        )
     md = surface.metadata
     if wavelength is None:
         w = md.get("wavelength")
-        wavelength = float(w) if isinstance(w, int | float) and 0 < w < 1e-3 else 632.8e-9
+        wavelength = (
+            float(w) if isinstance(w, int | float) and 0 < w < 1e-3 else 632.8e-9
+        )
     f32 = np.float32
-    wl, isf, obl = (float(f32(v)) for v in (wavelength, intf_scale_factor, obliquity_factor))
-    for label, v in (("wavelength", wl), ("intf_scale_factor", isf), ("obliquity_factor", obl)):
+    wl, isf, obl = (
+        float(f32(v)) for v in (wavelength, intf_scale_factor, obliquity_factor)
+    )
+    for label, v in (
+        ("wavelength", wl),
+        ("intf_scale_factor", isf),
+        ("obliquity_factor", obl),
+    ):
         if not np.isfinite(v) or v <= 0:
-            raise writer_error("metropro_dat", f"{label} is {v!r}", "use a positive number")
+            raise writer_error(
+                "metropro_dat", f"{label} is {v!r}", "use a positive number"
+            )
     ny, nx = surface.shape
     if nx > 65535 or ny > 65535:
-        raise writer_error("metropro_dat", f"map is {ny}x{nx}", "at most 65535x65535 pixels")
+        raise writer_error(
+            "metropro_dat", f"map is {ny}x{nx}", "at most 65535x65535 pixels"
+        )
     if surface.calibrated:
         assert surface.dx is not None and surface.dy is not None
         if abs(surface.dx - surface.dy) > 1e-6 * max(surface.dx, surface.dy):
@@ -400,15 +446,22 @@ def encode_metropro_dat(
         )
     raw[valid] = -counts if sign else counts
 
-    ox, oy = pixel_origin(surface) if phase_origin is None else (int(v) for v in phase_origin)
+    ox, oy = (
+        pixel_origin(surface)
+        if phase_origin is None
+        else (int(v) for v in phase_origin)
+    )
     cam_w, cam_h = camera_size if camera_size is not None else (ox + nx, oy + ny)
     if intensity is not None:
         inten = np.asarray(intensity)
         if inten.ndim == 2:
             inten = inten[None]
         if inten.ndim != 3:
-            raise writer_error("metropro_dat", f"intensity has shape {inten.shape}",
-                               "use (h, w) or (buckets, h, w)")
+            raise writer_error(
+                "metropro_dat",
+                f"intensity has shape {inten.shape}",
+                "use (h, w) or (buckets, h, w)",
+            )
         inten_bytes = np.clip(inten, 0, 65535).astype(">u2").tobytes()
         nb, ah, aw = inten.shape
     else:
@@ -423,8 +476,11 @@ def encode_metropro_dat(
             struct.pack_into(fmt, hdr, off, value)
         except struct.error:
             field = next((f for f, o, _ in _FIELDS if o == off), f"byte {off}")
-            raise writer_error("metropro_dat", f"header field {field} cannot hold {value!r}",
-                               "check the phase window, camera size and origin") from None
+            raise writer_error(
+                "metropro_dat",
+                f"header field {field} cannot hold {value!r}",
+                "check the phase window, camera size and origin",
+            ) from None
 
     put(">I", 0, MAGIC[header_format])
     put(">H", 4, header_format)

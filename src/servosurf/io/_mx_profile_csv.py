@@ -54,7 +54,9 @@ def _factor(unit: str | None, name: str, column: str) -> float:
     try:
         return length_factor(unit)
     except UnitError:
-        raise corrupt(name, f"column {column} has unit {unit!r}", "a length unit") from None
+        raise corrupt(
+            name, f"column {column} has unit {unit!r}", "a length unit"
+        ) from None
 
 
 @register_reader(
@@ -79,12 +81,18 @@ def read_mx_profile_csv(source: Source) -> Profile:
         the first position in m.
     """
     name = source.name
-    lines = [ln for ln in decode_text(source.data).lstrip("\ufeff").splitlines() if ln.strip()]
+    lines = [
+        ln
+        for ln in decode_text(source.data).lstrip("\ufeff").splitlines()
+        if ln.strip()
+    ]
     if not lines:
         raise corrupt(name, "file is empty", "a header 'X, Y, Slice' and data rows")
     head = _header(lines[0])
     if head is None:
-        raise corrupt(name, f"header line is {lines[0][:60]!r}", "columns 'X, Y[, Slice]'")
+        raise corrupt(
+            name, f"header line is {lines[0][:60]!r}", "columns 'X, Y[, Slice]'"
+        )
     _, xu, _, zu = head
     fx, fz = _factor(xu, name, "X"), _factor(zu, name, "Y")
     xs, zs = [], []
@@ -92,7 +100,9 @@ def read_mx_profile_csv(source: Source) -> Profile:
     for i, ln in enumerate(lines[1:], start=2):
         parts = [p.strip() for p in ln.split(",")]
         if len(parts) < 2:
-            raise corrupt(name, f"line {i} has {len(parts)} field(s)", "at least X and Y")
+            raise corrupt(
+                name, f"line {i} has {len(parts)} field(s)", "at least X and Y"
+            )
         if len(parts) >= 3:
             if first_slice is None:
                 first_slice = parts[2]
@@ -101,7 +111,9 @@ def read_mx_profile_csv(source: Source) -> Profile:
         try:
             x = float(parts[0])
         except ValueError:
-            raise corrupt(name, f"line {i} X is {parts[0][:30]!r}", "a number") from None
+            raise corrupt(
+                name, f"line {i} X is {parts[0][:30]!r}", "a number"
+            ) from None
         zt = parts[1]
         if zt == "" or zt.lower() in ("nan", "no data", "nodata", "invalid"):
             z = np.nan
@@ -109,7 +121,9 @@ def read_mx_profile_csv(source: Source) -> Profile:
             try:
                 z = float(zt)
             except ValueError:
-                raise corrupt(name, f"line {i} Y is {zt[:30]!r}", "a number or empty") from None
+                raise corrupt(
+                    name, f"line {i} Y is {zt[:30]!r}", "a number or empty"
+                ) from None
         xs.append(x)
         zs.append(z)
     if len(xs) < 2:
@@ -122,19 +136,34 @@ def read_mx_profile_csv(source: Source) -> Profile:
     step = float(np.median(steps))
     if not step > 0:
         raise corrupt(name, f"median X step is {step!r} m", "increasing X positions")
-    idx = np.rint((x - x[0]) / step).astype(np.int64)
-    if np.any(np.diff(idx) <= 0) or idx[-1] > 64 * len(x) + 1024:
-        raise corrupt(name, "X positions are not increasing on a regular grid",
-                      "a constant step (gaps allowed)")
+    pos = np.rint((x - x[0]) / step)
+    if not np.isfinite(pos).all() or pos.max() > 64 * len(x) + 1024:
+        raise corrupt(
+            name,
+            "X positions are not increasing on a regular grid",
+            "a constant step (gaps allowed)",
+        )
+    idx = pos.astype(np.int64)
+    if np.any(np.diff(idx) <= 0):
+        raise corrupt(
+            name,
+            "X positions are not increasing on a regular grid",
+            "a constant step (gaps allowed)",
+        )
     step = float((x[-1] - x[0]) / idx[-1])
     if np.max(np.abs(x - (x[0] + idx * step))) > 0.05 * step:
-        raise corrupt(name, "X positions deviate from a constant step by more than 5 %",
-                      "a constant step")
+        raise corrupt(
+            name,
+            "X positions deviate from a constant step by more than 5 %",
+            "a constant step",
+        )
     out = np.full(idx[-1] + 1, np.nan)
     out[idx] = z
     out[~np.isfinite(out)] = np.nan
     if not np.isfinite(out).any():
-        raise corrupt(name, f"all {out.size} heights are invalid", "at least one valid height")
+        raise corrupt(
+            name, f"all {out.size} heights are invalid", "at least one valid height"
+        )
     md = {"instrument": "ZYGO", "source_format": "mx_profile_csv"}
     if first_slice:
         md["slice"] = first_slice

@@ -1,6 +1,8 @@
-"""servosurf's own ``.npz`` container: ``z`` (m), ``dx``, ``dy``, ``x0``, ``y0`` (m) and
-``metadata`` (a JSON string). ``dx``/``dy`` are NaN when uncalibrated. Read without
-pickle; every array header is checked against the member size before allocation.
+"""servosurf's own ``.npz`` container.
+
+Members: ``z`` (heights in m), ``dx``, ``dy``, ``x0``, ``y0`` (m; ``dx``/``dy`` NaN when
+uncalibrated) and ``metadata`` (a JSON string). Read without pickle; every array
+header is checked against the member size before allocation.
 """
 
 from __future__ import annotations
@@ -39,11 +41,15 @@ def _is_npz(data: bytes) -> bool:
     return "z.npy" in names and all(n.endswith(".npy") for n in names)
 
 
-def _array(zf: zipfile.ZipFile, key: str, name: str, *, required: bool) -> np.ndarray | None:
+def _array(
+    zf: zipfile.ZipFile, key: str, name: str, *, required: bool
+) -> np.ndarray | None:
     member = key + ".npy"
     if member not in zf.namelist():
         if required:
-            raise corrupt(name, f"archive has no {member}", f"members {', '.join(_REQUIRED)}")
+            raise corrupt(
+                name, f"archive has no {member}", f"members {', '.join(_REQUIRED)}"
+            )
         return None
     raw = zip_member(zf, member, name)
     fp = BytesIO(raw)
@@ -59,12 +65,24 @@ def _array(zf: zipfile.ZipFile, key: str, name: str, *, required: bool) -> np.nd
             raise ValueError("object arrays are not accepted")
         count = int(np.prod(shape, dtype=np.float64))
         if count * dtype.itemsize > len(raw) - fp.tell():
-            raise ValueError(f"header claims {shape} {dtype} but {len(raw)} bytes are stored")
+            raise ValueError(
+                f"header claims {shape} {dtype} but {len(raw)} bytes are stored"
+            )
         fp.seek(0)
         return np.lib.format.read_array(fp, allow_pickle=False)
-    except (ValueError, TypeError, OverflowError, EOFError, KeyError, SyntaxError,
-            MemoryError, UnicodeDecodeError) as exc:
-        raise corrupt(name, f"{member} is not a valid .npy array ({exc})", "a numeric array") from None
+    except (
+        ValueError,
+        TypeError,
+        OverflowError,
+        EOFError,
+        KeyError,
+        SyntaxError,
+        MemoryError,
+        UnicodeDecodeError,
+    ) as exc:
+        raise corrupt(
+            name, f"{member} is not a valid .npy array ({exc})", "a numeric array"
+        ) from None
 
 
 def _scalar(a: np.ndarray | None, key: str, name: str) -> float | None:
@@ -102,11 +120,21 @@ def read_npz(source: Source) -> Surface:
         z = _array(zf, "z", name, required=True)
         assert z is not None
         if z.ndim != 2 or z.dtype.kind not in "fiu" or z.size == 0:
-            raise corrupt(name, f"z has shape {z.shape} and type {z.dtype}", "a 2-D numeric map")
-        dx = check_pixel_size(_scalar(_array(zf, "dx", name, required=True), "dx", name),
-                              name, "dx", zero_means_uncalibrated=False)
-        dy = check_pixel_size(_scalar(_array(zf, "dy", name, required=True), "dy", name),
-                              name, "dy", zero_means_uncalibrated=False)
+            raise corrupt(
+                name, f"z has shape {z.shape} and type {z.dtype}", "a 2-D numeric map"
+            )
+        dx = check_pixel_size(
+            _scalar(_array(zf, "dx", name, required=True), "dx", name),
+            name,
+            "dx",
+            zero_means_uncalibrated=False,
+        )
+        dy = check_pixel_size(
+            _scalar(_array(zf, "dy", name, required=True), "dy", name),
+            name,
+            "dy",
+            zero_means_uncalibrated=False,
+        )
         x0 = _scalar(_array(zf, "x0", name, required=False), "x0", name) or 0.0
         y0 = _scalar(_array(zf, "y0", name, required=False), "y0", name) or 0.0
         meta = _array(zf, "metadata", name, required=False)
@@ -149,9 +177,10 @@ def encode_npz(surface: Surface, *, compressed: bool = True) -> bytes:
         "dy": np.float64(surface.dy if surface.dy is not None else nan),
         "x0": np.float64(surface.x0),
         "y0": np.float64(surface.y0),
-        "metadata": np.array(metadata_json(surface.metadata, exclude=("source_format",))),
+        "metadata": np.array(
+            metadata_json(surface.metadata, exclude=("source_format",))
+        ),
     }
     out = BytesIO()
     (np.savez_compressed if compressed else np.savez)(out, **arrays)
     return out.getvalue()
-

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Literal
 
+import numpy as np
+
 from ..errors import FileFormatError, UnsupportedFileFormatError
 from ..metrology._surface import Profile, Surface
 from ._common import Source, as_surface, load_source
@@ -95,7 +97,7 @@ def register_reader(
     sniff: Callable[[bytes], bool] | None = None,
     kind: Kind = "surface",
 ) -> Callable[[ReadFn], ReadFn]:
-    """Decorator registering ``read(source: Source) -> Surface | Profile``.
+    """Register ``read(source: Source) -> Surface | Profile`` as a reader (decorator).
 
     Parameters
     ----------
@@ -121,7 +123,13 @@ def register_reader(
 
     def deco(fn: ReadFn) -> ReadFn:
         _READERS[name] = _Reader(
-            name, description, tuple(s.lower() for s in suffixes), magic, sniff, kind, fn
+            name,
+            description,
+            tuple(s.lower() for s in suffixes),
+            magic,
+            sniff,
+            kind,
+            fn,
         )
         return fn
 
@@ -131,7 +139,7 @@ def register_reader(
 def register_writer(
     name: str, *, description: str, suffixes: tuple[str, ...]
 ) -> Callable[[EncodeFn], EncodeFn]:
-    """Decorator registering ``encode(surface, **options) -> bytes`` for ``name``.
+    """Register ``encode(surface, **options) -> bytes`` as a writer (decorator).
 
     Parameters
     ----------
@@ -149,7 +157,9 @@ def register_writer(
     """
 
     def deco(fn: EncodeFn) -> EncodeFn:
-        _WRITERS[name] = _Writer(name, description, tuple(s.lower() for s in suffixes), fn)
+        _WRITERS[name] = _Writer(
+            name, description, tuple(s.lower() for s in suffixes), fn
+        )
         return fn
 
     return deco
@@ -270,7 +280,10 @@ def read_any(
     """
     src = load_source(source)
     name = _resolve_name(format, _READERS, "reader") if format else detect_format(src)
-    return _READERS[name].read(src), name
+    # Damaged files may hold extreme numbers; overflow to inf becomes NaN (invalid)
+    # in the readers, so numpy's floating-point warnings are noise here.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        return _READERS[name].read(src), name
 
 
 def read_surface(
@@ -301,14 +314,26 @@ def read_surface(
     CorruptedFileError
         Truncated or inconsistent file, or a map without any valid pixel.
 
+    See Also
+    --------
+    read_profile, write_surface, formats
+
     Notes
     -----
     A profile file (e.g. an Mx profile CSV) is returned as a one-row surface with
     ``dy = dx``.
 
-    See Also
+    Examples
     --------
-    read_profile, write_surface, formats
+    >>> import io
+    >>> import numpy as np
+    >>> from servosurf.io import read_surface, write_surface
+    >>> from servosurf.metrology import Surface
+    >>> buf = io.BytesIO()
+    >>> write_surface(Surface(np.zeros((2, 3)), 1e-6, 1e-6), buf, format="x3p")
+    >>> s = read_surface(io.BytesIO(buf.getvalue()))
+    >>> s.shape, s.dx, s.metadata["source_format"]
+    ((2, 3), 1e-06, 'x3p')
     """
     obj, _ = read_any(source, format=format)
     return as_surface(obj)
@@ -405,16 +430,21 @@ def write_surface(
         suffix = Path(path).suffix.lower()
         names = [w.name for w in _WRITERS.values() if suffix in w.suffixes]
         if not names:
-            known = ", ".join(f"{w.name} ({'/'.join(w.suffixes)})" for w in _WRITERS.values())
+            known = ", ".join(
+                f"{w.name} ({'/'.join(w.suffixes)})" for w in _WRITERS.values()
+            )
             raise UnsupportedFileFormatError(
-                f"{path}: no writer for suffix {suffix or 'none'!r}; expected one of: {known}"
+                f"{path}: no writer for suffix {suffix or 'none'!r}; "
+                f"expected one of: {known}"
             )
         name = names[0]
     else:
         name = _resolve_name(format, _WRITERS, "writer")
     data = _WRITERS[name].encode(surf, **options)
     if not isinstance(data, bytes):  # pragma: no cover - writer contract
-        raise FileFormatError(f"writer {name} returned {type(data).__name__}, not bytes")
+        raise FileFormatError(
+            f"writer {name} returned {type(data).__name__}, not bytes"
+        )
     if isinstance(path, str | os.PathLike):
         from ..commands._common import atomic_write
 

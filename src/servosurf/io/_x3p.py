@@ -25,10 +25,12 @@ from ._common import (
     Source,
     check_pixel_size,
     corrupt,
+    iso_date,
     make_surface,
     metadata_json,
     open_zip,
     parse_metadata_json,
+    timestamp_from_iso,
     unsupported,
     writer_error,
     zip_member,
@@ -71,8 +73,13 @@ def _text(elem: ET.Element | None, *path: str) -> str | None:
     return e.text.strip()
 
 
-def _number(root: ET.Element, name: str, *path: str, default: float | None = None,
-            integer: bool = False) -> float:
+def _number(
+    root: ET.Element,
+    name: str,
+    *path: str,
+    default: float | None = None,
+    integer: bool = False,
+) -> float:
     t = _text(root, *path)
     if t is None or t == "":
         if default is None:
@@ -81,10 +88,15 @@ def _number(root: ET.Element, name: str, *path: str, default: float | None = Non
     try:
         v = float(t)
     except ValueError:
-        raise corrupt(name, f"main.xml {'/'.join(path)} is {t[:30]!r}", "a number") from None
+        raise corrupt(
+            name, f"main.xml {'/'.join(path)} is {t[:30]!r}", "a number"
+        ) from None
     if not np.isfinite(v) or (integer and (v != int(v) or not 0 < v < 2**31)):
-        raise corrupt(name, f"main.xml {'/'.join(path)} is {t[:30]!r}",
-                      "a positive integer" if integer else "a finite number")
+        raise corrupt(
+            name,
+            f"main.xml {'/'.join(path)} is {t[:30]!r}",
+            "a positive integer" if integer else "a finite number",
+        )
     return int(v) if integer else v
 
 
@@ -114,19 +126,27 @@ def read_x3p(source: Source) -> Surface:
     zf = open_zip(source.data, name, "an .x3p zip archive")
     with zf:
         if "main.xml" not in zf.namelist():
-            raise corrupt(name, "archive has no main.xml", "an .x3p archive with main.xml")
+            raise corrupt(
+                name, "archive has no main.xml", "an .x3p archive with main.xml"
+            )
         info = zf.getinfo("main.xml")
         if info.file_size > _MAX_XML_BYTES:
-            raise corrupt(name, f"main.xml has {info.file_size} bytes", "at most 256 MiB")
+            raise corrupt(
+                name, f"main.xml has {info.file_size} bytes", "at most 256 MiB"
+            )
         xml = zip_member(zf, "main.xml", name)
         if b"<!DOCTYPE" in xml or b"<!ENTITY" in xml:
             raise unsupported(name, "main.xml declares a DTD or entities", "plain XML")
         try:
             root = ET.fromstring(xml)
         except ET.ParseError as exc:
-            raise corrupt(name, f"main.xml is not well-formed XML ({exc})", "valid XML") from None
+            raise corrupt(
+                name, f"main.xml is not well-formed XML ({exc})", "valid XML"
+            ) from None
         if _local(root.tag) != "ISO5436_2":
-            raise corrupt(name, f"main.xml root element is {_local(root.tag)!r}", "ISO5436_2")
+            raise corrupt(
+                name, f"main.xml root element is {_local(root.tag)!r}", "ISO5436_2"
+            )
         return _read_tree(zf, root, name)
 
 
@@ -137,26 +157,37 @@ def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface:
         raise corrupt(name, "main.xml lacks Record1 or Record3", "both records")
     feature = _text(r1, "FeatureType") or "SUR"
     if feature not in ("SUR", "PRF"):
-        raise unsupported(name, f"FeatureType is {feature!r}", "SUR (surface) or PRF (profile)")
+        raise unsupported(
+            name, f"FeatureType is {feature!r}", "SUR (surface) or PRF (profile)"
+        )
     axes = _child(r1, "Axes")
     for ax in ("CX", "CY"):
         if _text(axes, ax, "AxisType") not in (None, "I"):
             raise unsupported(
-                name, f"axis {ax} is of type {_text(axes, ax, 'AxisType')!r} (point list)",
+                name,
+                f"axis {ax} is of type {_text(axes, ax, 'AxisType')!r} (point list)",
                 "incremental (I) x and y axes",
             )
-    dx = check_pixel_size(_number(root, name, "Record1", "Axes", "CX", "Increment"),
-                          name, "CX/Increment", zero_means_uncalibrated=False)
+    dx = check_pixel_size(
+        _number(root, name, "Record1", "Axes", "CX", "Increment"),
+        name,
+        "CX/Increment",
+        zero_means_uncalibrated=False,
+    )
     dy_raw = _number(root, name, "Record1", "Axes", "CY", "Increment", default=0.0)
     nx = _number(root, name, "Record3", "MatrixDimension", "SizeX", integer=True)
     ny = _number(root, name, "Record3", "MatrixDimension", "SizeY", integer=True)
-    nz = _number(root, name, "Record3", "MatrixDimension", "SizeZ", default=1, integer=True)
+    nz = _number(
+        root, name, "Record3", "MatrixDimension", "SizeZ", default=1, integer=True
+    )
     if nz != 1:
         raise unsupported(name, f"SizeZ is {nz} (several layers)", "SizeZ = 1")
     if ny == 1 and dy_raw == 0.0:
         dy = dx  # profiles may leave CY/Increment unset
     else:
-        dy = check_pixel_size(dy_raw, name, "CY/Increment", zero_means_uncalibrated=False)
+        dy = check_pixel_size(
+            dy_raw, name, "CY/Increment", zero_means_uncalibrated=False
+        )
     x0 = _number(root, name, "Record1", "Axes", "CX", "Offset", default=0.0)
     y0 = _number(root, name, "Record1", "Axes", "CY", "Offset", default=0.0)
     ztype = _text(axes, "CZ", "DataType") or "D"
@@ -169,7 +200,9 @@ def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface:
     if link is not None:
         member = _text(link, "PointDataLink")
         if not member:
-            raise corrupt(name, "DataLink has no PointDataLink", "the binary member name")
+            raise corrupt(
+                name, "DataLink has no PointDataLink", "the binary member name"
+            )
         dtype = np.dtype(_DTYPES[ztype])
         raw = zip_member(zf, member, name, expected_size=n * dtype.itemsize)
         values = np.frombuffer(raw, dtype=dtype).astype(np.float64)
@@ -178,10 +211,14 @@ def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface:
         if vmember:
             bits = zip_member(zf, vmember, name)
             if len(bits) < (n + 7) // 8:
-                raise corrupt(name, f"{vmember} has {len(bits)} bytes",
-                              f"{(n + 7) // 8} bytes (one bit per point)")
-            valid = np.unpackbits(np.frombuffer(bits, dtype=np.uint8), count=n,
-                                  bitorder="little").astype(bool)
+                raise corrupt(
+                    name,
+                    f"{vmember} has {len(bits)} bytes",
+                    f"{(n + 7) // 8} bytes (one bit per point)",
+                )
+            valid = np.unpackbits(
+                np.frombuffer(bits, dtype=np.uint8), count=n, bitorder="little"
+            ).astype(bool)
             invalid |= ~valid
     else:
         values, invalid = _data_list(r3, n, name)
@@ -200,7 +237,9 @@ def _data_list(r3: ET.Element, n: int, name: str) -> tuple[np.ndarray, np.ndarra
         raise corrupt(name, "Record3 has neither DataLink nor DataList", "one of them")
     datums = [c for c in dl if _local(c.tag) == "Datum"]
     if len(datums) != n:
-        raise corrupt(name, f"DataList has {len(datums)} Datum elements", f"{n} (SizeX*SizeY)")
+        raise corrupt(
+            name, f"DataList has {len(datums)} Datum elements", f"{n} (SizeX*SizeY)"
+        )
     values = np.full(n, np.nan)
     for i, d in enumerate(datums):
         t = (d.text or "").strip()
@@ -213,7 +252,9 @@ def _data_list(r3: ET.Element, n: int, name: str) -> tuple[np.ndarray, np.ndarra
         try:
             values[i] = float(t)
         except ValueError:
-            raise corrupt(name, f"Datum {i} is {t[:30]!r}", "a number or empty") from None
+            raise corrupt(
+                name, f"Datum {i} is {t[:30]!r}", "a number or empty"
+            ) from None
     return values, ~np.isfinite(values)
 
 
@@ -223,18 +264,23 @@ def _metadata(root: ET.Element) -> dict[str, Any]:
     if r2 is None:
         return md
     date = _text(r2, "Date")
-    if date:
-        md["date"] = date
+    stamp = timestamp_from_iso(date)
+    if date and (stamp is None or iso_date(stamp) is not None):
+        md["date"] = date  # dates before 1980 are placeholders (MountainsMap: 1970)
     maker = _text(r2, "Instrument", "Manufacturer")
     model = _text(r2, "Instrument", "Model")
-    inst = " ".join(v for v in (maker, model) if v and v.lower() not in ("unknown", "not available"))
+    inst = " ".join(
+        v for v in (maker, model) if v and v.lower() not in ("unknown", "not available")
+    )
     if inst:
         md["instrument"] = inst
-    for key, path in (("serial", ("Instrument", "Serial")),
-                      ("software", ("Instrument", "Version")),
-                      ("creator", ("Creator",)),
-                      ("probing_system", ("ProbingSystem", "Type")),
-                      ("objective", ("ProbingSystem", "Identification"))):
+    for key, path in (
+        ("serial", ("Instrument", "Serial")),
+        ("software", ("Instrument", "Version")),
+        ("creator", ("Creator",)),
+        ("probing_system", ("ProbingSystem", "Type")),
+        ("objective", ("ProbingSystem", "Identification")),
+    ):
         v = _text(r2, *path)
         if v and v.lower() not in ("unknown", "not available"):
             md[key] = v
@@ -256,7 +302,7 @@ def _sub(parent: ET.Element, tag: str, text: str | None = None) -> ET.Element:
 
 @register_writer(
     "x3p",
-    description="ISO 5436-2 / ISO 25178-72 XML 3D surface profile (.x3p), float64 heights",
+    description="ISO 5436-2 / ISO 25178-72 (.x3p), float64 heights",
     suffixes=(".x3p",),
 )
 def encode_x3p(surface: Surface) -> bytes:
@@ -282,8 +328,11 @@ def encode_x3p(surface: Surface) -> bytes:
         When the surface is uncalibrated (x3p needs increments in m).
     """
     if not surface.calibrated:
-        raise writer_error("x3p", "the surface is laterally uncalibrated (dx or dy is None)",
-                           "x3p needs pixel sizes in m; set dx and dy first")
+        raise writer_error(
+            "x3p",
+            "the surface is laterally uncalibrated (dx or dy is None)",
+            "x3p needs pixel sizes in m; set dx and dy first",
+        )
     ny, nx = surface.shape
     md = surface.metadata
     z = np.ascontiguousarray(surface.z, dtype="<f8")
@@ -292,13 +341,20 @@ def encode_x3p(surface: Surface) -> bytes:
     xsi = "http://www.w3.org/2001/XMLSchema-instance"
     root = ET.Element(
         "p:ISO5436_2",
-        {"xmlns:p": NS, "xmlns:xsi": xsi, "xsi:schemaLocation": f"{NS} {NS}/ISO5436_2.xsd"},
+        {
+            "xmlns:p": NS,
+            "xmlns:xsi": xsi,
+            "xsi:schemaLocation": f"{NS} {NS}/ISO5436_2.xsd",
+        },
     )
     r1 = _sub(root, "Record1")
     _sub(r1, "Revision", "ISO5436 - 2000")
     _sub(r1, "FeatureType", "SUR")
     axes = _sub(r1, "Axes")
-    for ax, inc, off in (("CX", surface.dx, surface.x0), ("CY", surface.dy, surface.y0)):
+    for ax, inc, off in (
+        ("CX", surface.dx, surface.x0),
+        ("CY", surface.dy, surface.y0),
+    ):
         e = _sub(axes, ax)
         _sub(e, "AxisType", "I")
         _sub(e, "DataType", "D")
@@ -337,14 +393,17 @@ def encode_x3p(surface: Surface) -> bytes:
     r4 = _sub(root, "Record4")
     _sub(r4, "ChecksumFile", "md5checksum.hex")
     ET.indent(root)
-    xml = b'<?xml version="1.0" encoding="UTF-8" standalone="no" ?>\n' + ET.tostring(
-        root, encoding="utf-8", xml_declaration=False
-    ) + b"\n"
+    xml = (
+        b'<?xml version="1.0" encoding="UTF-8" standalone="no" ?>\n'
+        + ET.tostring(root, encoding="utf-8", xml_declaration=False)
+        + b"\n"
+    )
     out = BytesIO()
     with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         zf.writestr("main.xml", xml)
-        zf.writestr("md5checksum.hex", f"{hashlib.md5(xml).hexdigest().upper()} *main.xml\n")
+        zf.writestr(
+            "md5checksum.hex", f"{hashlib.md5(xml).hexdigest().upper()} *main.xml\n"
+        )
         for member, content in members.items():
             zf.writestr(member, content)
     return out.getvalue()
-

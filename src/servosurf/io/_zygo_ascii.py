@@ -59,28 +59,83 @@ _TOKEN = re.compile(r'"[^"\n]*"|\S+')
 # (line index after the title line, field names); a name starting with "$" is a
 # quoted string, others are numbers.
 _LINES: tuple[tuple[str, ...], ...] = (
-    ("swinfo_type", "swinfo_vers_maj", "swinfo_vers_min", "swinfo_vers_bug", "$swinfo_date"),
+    (
+        "swinfo_type",
+        "swinfo_vers_maj",
+        "swinfo_vers_min",
+        "swinfo_vers_bug",
+        "$swinfo_date",
+    ),
     ("ac_org_x", "ac_org_y", "ac_width", "ac_height", "ac_n_buckets", "ac_range"),
     ("cn_org_x", "cn_org_y", "cn_width", "cn_height"),
     ("$comment",),
     ("$part_ser_num",),
     ("$part_name",),
-    ("source", "intf_scale_factor", "wavelength_in", "num_aperture", "obliquity_factor",
-     "magnification", "lateral_res", "time_stamp"),
-    ("camera_width", "camera_height", "sys_type", "sys_board", "sys_serial", "inst_id",
-     "$obj_name"),
-    ("acq_type", "intens_avg_cnt", "pzt_cal", "pzt_gain", "pzt_gain_tol", "agc",
-     "target_range", "light_level", "min_mod", "min_mod_count"),
-    ("phase_res", "phase_avg_cnt", "min_area", "discon_action", "discon_filter",
-     "connect_order", "rem_tilt_bias", "sign", "codev_type"),
+    (
+        "source",
+        "intf_scale_factor",
+        "wavelength_in",
+        "num_aperture",
+        "obliquity_factor",
+        "magnification",
+        "lateral_res",
+        "time_stamp",
+    ),
+    (
+        "camera_width",
+        "camera_height",
+        "sys_type",
+        "sys_board",
+        "sys_serial",
+        "inst_id",
+        "$obj_name",
+    ),
+    (
+        "acq_type",
+        "intens_avg_cnt",
+        "pzt_cal",
+        "pzt_gain",
+        "pzt_gain_tol",
+        "agc",
+        "target_range",
+        "light_level",
+        "min_mod",
+        "min_mod_count",
+    ),
+    (
+        "phase_res",
+        "phase_avg_cnt",
+        "min_area",
+        "discon_action",
+        "discon_filter",
+        "connect_order",
+        "rem_tilt_bias",
+        "sign",
+        "codev_type",
+    ),
     ("sub_sys_err", "$sys_err_file_name"),
     ("refractive_index", "part_thickness"),
     ("$zoom_descr",),
 )
 _INT_FIELDS = {
-    "ac_org_x", "ac_org_y", "ac_width", "ac_height", "ac_n_buckets", "cn_org_x", "cn_org_y",
-    "cn_width", "cn_height", "phase_res", "sign", "time_stamp", "swinfo_type",
-    "swinfo_vers_maj", "swinfo_vers_min", "swinfo_vers_bug", "camera_width", "camera_height",
+    "ac_org_x",
+    "ac_org_y",
+    "ac_width",
+    "ac_height",
+    "ac_n_buckets",
+    "cn_org_x",
+    "cn_org_y",
+    "cn_width",
+    "cn_height",
+    "phase_res",
+    "sign",
+    "time_stamp",
+    "swinfo_type",
+    "swinfo_vers_maj",
+    "swinfo_vers_min",
+    "swinfo_vers_bug",
+    "camera_width",
+    "camera_height",
 }
 _MAX_DIM = 1 << 16
 
@@ -138,7 +193,8 @@ def parse_ascii_header(
     body = header[1:]
     if len(body) < required_lines:
         raise corrupt(
-            name, f"header has {len(body)} lines after the title",
+            name,
+            f"header has {len(body)} lines after the title",
             f"at least {required_lines} (MetroPro text header)",
         )
     h: dict[str, Any] = {}
@@ -146,9 +202,14 @@ def parse_ascii_header(
         if i >= len(body):
             break
         tokens = _TOKEN.findall(body[i])
-        if i < required_lines and len(tokens) < len(fields) and not fields[0].startswith("$"):
+        if (
+            i < required_lines
+            and len(tokens) < len(fields)
+            and not fields[0].startswith("$")
+        ):
             raise corrupt(
-                name, f"header line {i + 2} has {len(tokens)} fields ({body[i][:60]!r})",
+                name,
+                f"header line {i + 2} has {len(tokens)} fields ({body[i][:60]!r})",
                 f"{len(fields)} fields ({' '.join(f.lstrip('$') for f in fields)})",
             )
         for field, tok in zip(fields, tokens, strict=False):
@@ -159,11 +220,15 @@ def parse_ascii_header(
                 v = float(tok)
             except ValueError:
                 raise corrupt(
-                    name, f"header line {i + 2} field {field} is {tok[:30]!r}", "a number"
+                    name,
+                    f"header line {i + 2} field {field} is {tok[:30]!r}",
+                    "a number",
                 ) from None
             if field in _INT_FIELDS:
                 if not np.isfinite(v) or v != int(v) or abs(v) > 2**31:
-                    raise corrupt(name, f"header field {field} is {tok[:30]!r}", "an integer")
+                    raise corrupt(
+                        name, f"header field {field} is {tok[:30]!r}", "an integer"
+                    )
                 v = int(v)
             h[field] = v
     for field in ("ac_width", "ac_height", "ac_n_buckets", "cn_width", "cn_height"):
@@ -174,7 +239,7 @@ def parse_ascii_header(
 
 
 def header_metadata(h: dict[str, Any]) -> dict[str, Any]:
-    """Common metadata from a parsed text header."""
+    """Return the common metadata of a parsed text header."""
     md: dict[str, Any] = {"instrument": "ZYGO"}
     if h.get("obj_name"):
         md["objective"] = h["obj_name"]
@@ -200,9 +265,20 @@ def header_metadata(h: dict[str, Any]) -> dict[str, Any]:
         md["comment"] = comment
     md["metropro"] = {
         k: h[k]
-        for k in ("phase_res", "sign", "intf_scale_factor", "obliquity_factor", "lateral_res",
-                  "camera_width", "camera_height", "cn_org_x", "cn_org_y", "part_name",
-                  "part_ser_num", "time_stamp")
+        for k in (
+            "phase_res",
+            "sign",
+            "intf_scale_factor",
+            "obliquity_factor",
+            "lateral_res",
+            "camera_width",
+            "camera_height",
+            "cn_org_x",
+            "cn_org_y",
+            "part_name",
+            "part_ser_num",
+            "time_stamp",
+        )
         if k in h
     }
     return md
@@ -211,7 +287,9 @@ def header_metadata(h: dict[str, Any]) -> dict[str, Any]:
 def _ints(block: str, count: int, name: str, what: str) -> np.ndarray:
     tokens = block.split()
     if len(tokens) != count:
-        raise corrupt(name, f"{what} block has {len(tokens)} values", f"{count} (from the header)")
+        raise corrupt(
+            name, f"{what} block has {len(tokens)} values", f"{count} (from the header)"
+        )
     if count == 0:
         return np.zeros(0, dtype=np.int64)
     try:
@@ -242,12 +320,17 @@ def read_zygo_ascii(source: Source) -> Surface:
     """
     name = source.name
     if not source.data.startswith(ASCII_MAGIC):
-        raise corrupt(name, f"file starts with {source.data[:24]!r}", f"{ASCII_MAGIC.decode()!r}")
+        raise corrupt(
+            name, f"file starts with {source.data[:24]!r}", f"{ASCII_MAGIC.decode()!r}"
+        )
     header, blocks = split_ascii(decode_text(source.data))
     h = parse_ascii_header(header, name, required_lines=10)
     if len(blocks) < 2:
-        raise corrupt(name, f"file has {len(blocks)} '#'-separated data block(s)",
-                      "an intensity block and a phase block")
+        raise corrupt(
+            name,
+            f"file has {len(blocks)} '#'-separated data block(s)",
+            "an intensity block and a phase block",
+        )
     nx, ny = h["cn_width"], h["cn_height"]
     if nx == 0 or ny == 0:
         raise corrupt(name, f"phase window is {nx}x{ny}", "a non-empty phase array")
@@ -261,12 +344,19 @@ def read_zygo_ascii(source: Source) -> Surface:
         v = h.get(field)
         if v is None or not np.isfinite(v) or v <= 0:
             raise corrupt(name, f"{field} is {v!r}", "a positive finite number")
-    scale = h["intf_scale_factor"] * h["obliquity_factor"] * h["wavelength_in"] / PHASE_RES[pr]
+    scale = (
+        h["intf_scale_factor"]
+        * h["obliquity_factor"]
+        * h["wavelength_in"]
+        / PHASE_RES[pr]
+    )
     if h.get("sign"):
         scale = -scale
     z = raw.astype(np.float64) * scale
     z[raw >= NO_DATA] = np.nan
-    dx = check_pixel_size(h.get("lateral_res", 0.0), name, "CameraRes", zero_means_uncalibrated=True)
+    dx = check_pixel_size(
+        h.get("lateral_res", 0.0), name, "CameraRes", zero_means_uncalibrated=True
+    )
     md = header_metadata(h)
     md["source_format"] = "zygo_ascii"
     x0 = h["cn_org_x"] * dx if dx else 0.0

@@ -28,8 +28,17 @@ from ._zygo_ascii import header_metadata, parse_ascii_header, split_ascii
 __all__ = ["read_zygo_xyz", "encode_zygo_xyz"]
 
 XYZ_MAGIC = b"Zygo XYZ Data File"
-_NATIVE_KEYS = ("wavelength", "objective", "date", "source_format", "metropro",
-                "instrument", "software", "comment", "zoom")
+_NATIVE_KEYS = (
+    "wavelength",
+    "objective",
+    "date",
+    "source_format",
+    "metropro",
+    "instrument",
+    "software",
+    "comment",
+    "zoom",
+)
 
 
 @register_reader(
@@ -54,11 +63,19 @@ def read_zygo_xyz(source: Source) -> Surface:
     """
     name = source.name
     if not source.data.startswith(XYZ_MAGIC):
-        raise corrupt(name, f"file starts with {source.data[:24]!r}", f"{XYZ_MAGIC.decode()!r}")
+        raise corrupt(
+            name, f"file starts with {source.data[:24]!r}", f"{XYZ_MAGIC.decode()!r}"
+        )
     header, blocks = split_ascii(decode_text(source.data))
     h = parse_ascii_header(header, name, required_lines=7)
     if not blocks:
         raise corrupt(name, "no '#' line ends the header", "a '#' line before the data")
+    if len(blocks) < 2:
+        raise corrupt(
+            name,
+            "file ends without the closing '#' line (truncated)",
+            "a '#' line after the last data line",
+        )
     text = blocks[0].replace("No Data", "nan").replace("no data", "nan")
     tokens = text.split()
     if len(tokens) % 3:
@@ -67,7 +84,9 @@ def read_zygo_xyz(source: Source) -> Surface:
         xyz = np.array(tokens, dtype=np.float64).reshape(-1, 3)
     except ValueError:
         bad = next((t for t in tokens if not _is_number(t)), tokens[0])
-        raise corrupt(name, f"data block holds {bad[:30]!r}", "numbers or 'No Data'") from None
+        raise corrupt(
+            name, f"data block holds {bad[:30]!r}", "numbers or 'No Data'"
+        ) from None
     if xyz.shape[0] == 0:
         raise corrupt(name, "data block is empty", "one line per pixel")
     x, y = xyz[:, 0], xyz[:, 1]
@@ -83,7 +102,9 @@ def read_zygo_xyz(source: Source) -> Surface:
         nx, ny = int(xi.max()) - ox + 1, int(yi.max()) - oy + 1
     if nx * ny > 64 * xyz.shape[0] + 4096:
         raise corrupt(
-            name, f"phase window {nx}x{ny} is far larger than the {xyz.shape[0]} points listed",
+            name,
+            f"phase window {nx}x{ny} is far larger than the {xyz.shape[0]} "
+            "points listed",
             "about one line per pixel",
         )
     col, row = xi - ox, yi - oy
@@ -92,13 +113,16 @@ def read_zygo_xyz(source: Source) -> Surface:
         if col.min() < 0 or row.min() < 0 or col.max() >= nx or row.max() >= ny:
             raise corrupt(
                 name,
-                f"pixel coordinates x {xi.min()}..{xi.max()}, y {yi.min()}..{yi.max()} fall "
-                f"outside the {nx}x{ny} phase window at ({ox}, {oy})",
+                f"pixel coordinates x {xi.min()}..{xi.max()}, "
+                f"y {yi.min()}..{yi.max()} fall outside the {nx}x{ny} phase "
+                f"window at ({ox}, {oy})",
                 "coordinates inside the window",
             )
     z = np.full((ny, nx), np.nan)
     z[row, col] = xyz[:, 2] / 1e6
-    dx = check_pixel_size(h.get("lateral_res", 0.0), name, "CameraRes", zero_means_uncalibrated=True)
+    dx = check_pixel_size(
+        h.get("lateral_res", 0.0), name, "CameraRes", zero_means_uncalibrated=True
+    )
     md = header_metadata(h)
     md["source_format"] = "zygo_xyz"
     x0 = ox * dx if dx else 0.0
@@ -170,7 +194,7 @@ def encode_zygo_xyz(surface: Surface) -> bytes:
     # objective, zoom, wavelength, pixel size and date are kept.
     lines = [
         "Zygo XYZ Data File - Format 1",
-        f'0 0 0 0 {_q("servosurf " + __version__, 29)}',
+        f"0 0 0 0 {_q('servosurf ' + __version__, 29)}",
         "0 0 0 0 0 0",
         f"{ox} {oy} {nx} {ny}",
         _q(comment, 81),

@@ -6,13 +6,12 @@ Private: called by :meth:`servosurf.servo.ServoLoop.simulate`, which checks inpu
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 from numba import njit
 
-_CACHE = os.environ.get("SERVOSURF_NUMBA_CACHE", "1") not in ("0", "")
-_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+from ._config import CACHE as _CACHE
+from ._config import FASTMATH as _FASTMATH
 
 __all__ = ["_closed_loop_sim", "_segment_area"]
 

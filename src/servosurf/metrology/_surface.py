@@ -17,9 +17,10 @@ __all__ = ["Surface", "Profile"]
 class Surface:
     """A height map in metres on a regular grid.
 
-    Axis convention: rows are y, columns are x, row 0 is the *top* of the image as an
-    instrument displays it (y decreases with the row index in instrument coordinates;
-    servosurf keeps ``y[i] = y0 - i * dy`` only in :meth:`coords`).
+    Axis convention: rows are y, columns are x; pixel (i, j) is centred at
+    ``(x0 + j dx, y0 + i dy)`` (:meth:`coords`). Readers keep the file's row order
+    (row 0 is the first row the instrument stores, the top of its image); simulated
+    maps have y increasing with the row index.
 
     Parameters
     ----------

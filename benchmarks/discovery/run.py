@@ -1,0 +1,118 @@
+"""Blind discrepancy-discovery benchmark: generate, diagnose, then score.
+
+Usage::
+
+    python benchmarks/discovery/run.py            # full suite (about 250 cases)
+    python benchmarks/discovery/run.py --quick    # 22 cases on the short campaign
+    python benchmarks/discovery/run.py --json     # JSON summary on stdout
+    python benchmarks/discovery/run.py --out DIR --jobs 2 --keep
+
+Steps (each case is diagnosed from its manifest and recordings only):
+
+1. :mod:`generate` writes the case folders and seals the key
+   (``key.sealed`` + ``key.secret`` + ``key.sha256``);
+2. every case is diagnosed in a pool of worker processes (``--jobs``, default 2)
+   with :func:`servosurf.diagnose.diagnose`; each result goes to
+   ``results/case_NNNN.json`` with its runtime;
+3. only then :mod:`score` opens the key and writes ``table.md`` and
+   ``score.json``.
+
+Recordings are deleted after scoring unless ``--keep``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+
+def _diagnose_one(args) -> str:
+    folder, out = args
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("SERVOSURF_QUIET", "1")
+    from servosurf.commands._common import write_json
+
+    t0 = time.perf_counter()
+    name = Path(folder).name
+    try:
+        from servosurf.diagnose import diagnose
+
+        d = diagnose(Path(folder) / "manifest.toml")
+        res = d.to_dict()
+    except Exception as exc:  # noqa: BLE001 - a failed case is scored as an error
+        res = {"error": f"{type(exc).__name__}: {exc}"}
+    res["runtime_s"] = time.perf_counter() - t0
+    write_json(Path(out) / "results" / f"{name}.json", res)
+    return name
+
+
+def diagnose_all(out: Path, jobs: int = 2, progress=True) -> None:
+    """Diagnose every case folder of ``out/cases`` (blind: manifests only)."""
+    import multiprocessing as mp
+
+    folders = sorted((out / "cases").glob("case_*"))
+    (out / "results").mkdir(exist_ok=True)
+    work = [(str(f), str(out)) for f in folders
+            if not (out / "results" / f"{f.name}.json").exists()]
+    t0 = time.perf_counter()
+    if jobs > 1:
+        ctx = mp.get_context("spawn")
+        with ctx.Pool(jobs, maxtasksperchild=20) as pool:
+            for i, name in enumerate(pool.imap_unordered(_diagnose_one, work)):
+                if progress:
+                    print(f"[{i + 1}/{len(work)}] {name} "
+                          f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr,
+                          flush=True)
+    else:
+        for i, w in enumerate(work):
+            _diagnose_one(w)
+            if progress:
+                print(f"[{i + 1}/{len(work)}]", file=sys.stderr, flush=True)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="22 cases, short campaign")
+    ap.add_argument("--json", action="store_true", help="print the JSON summary")
+    ap.add_argument("--out", default=None, help="work folder (default results/"
+                    "discovery[-quick])")
+    ap.add_argument("--jobs", type=int, default=2, help="worker processes")
+    ap.add_argument("--seed", type=int, default=1, help="suite seed")
+    ap.add_argument("--keep", action="store_true", help="keep the recordings")
+    ap.add_argument("--limit", type=int, help="only the first N cases")
+    a = ap.parse_args(argv)
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    out = Path(a.out or ("results/discovery-quick" if a.quick else "results/discovery"))
+    out.mkdir(parents=True, exist_ok=True)
+    import generate
+    import score
+
+    t0 = time.perf_counter()
+    if not (out / "key.sealed").exists():
+        print(f"generating cases in {out} ...", file=sys.stderr, flush=True)
+        generate.generate(out, quick=a.quick, seed=a.seed, jobs=a.jobs, limit=a.limit)
+    t1 = time.perf_counter()
+    print("diagnosing (blind) ...", file=sys.stderr, flush=True)
+    diagnose_all(out, jobs=a.jobs)
+    t2 = time.perf_counter()
+    s = score.score(out)
+    s["wall_time_s"] = {"generate": t1 - t0, "diagnose": t2 - t1}
+    (out / "score.json").write_text(json.dumps(s, indent=2))
+    tab = score.table(s)
+    (out / "table.md").write_text(tab + "\n")
+    if not a.keep:
+        shutil.rmtree(out / "cases", ignore_errors=True)
+    print(json.dumps(s, indent=2) if a.json else tab)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
