@@ -110,10 +110,10 @@ def _text(info: dict[str, Any], path: str) -> str:
             f"  Pa / Pq        {info['pa_m'] * nm:.4f} / {info['pq_m'] * nm:.4f} nm "
             "(primary profile about the mean, unfiltered)"
         )
-    for k, v in info["metadata"].items():
-        if isinstance(v, dict):
-            continue
-        lines.append(f"  {k:<14} {v}")
+    flat = {k: v for k, v in info["metadata"].items() if not isinstance(v, dict)}
+    width = max([14, *(len(k) for k in flat)])
+    for k, v in flat.items():
+        lines.append(f"  {k:<{width}} {v}")
     return "\n".join(lines)
 
 

@@ -60,8 +60,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--format",
         choices=FORMATS,
         default=None,
-        help="height-map file format (default datx; npz when the file-format "
-        "writers are unavailable)",
+        help="height-map file format (default datx)",
     )
     p.add_argument(
         "--mesh",
@@ -81,27 +80,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 
 def _write_map(surface, path, fmt):
-    import json
-
-    import numpy as np
-
-    from ._common import atomic_write
-
-    if fmt == "npz":
-
-        def w(p):
-            with open(p, "wb") as fh:
-                np.savez_compressed(
-                    fh,
-                    z=surface.z,
-                    dx=surface.dx,
-                    dy=surface.dy,
-                    x0=surface.x0,
-                    y0=surface.y0,
-                    metadata=json.dumps(surface.metadata, default=float),
-                )
-
-        return atomic_write(path, w)
+    """Write the height map with the io writers (atomic), settings as metadata."""
     from ..io import write_surface
 
     write_surface(surface, path, format=fmt)
@@ -133,14 +112,7 @@ def run(args) -> int:
     tp = Path(args.toolpath)
     if not tp.is_file():
         raise ConfigError(f"{tp}: toolpath file not found")
-    fmt = args.format
-    if fmt is None:
-        try:
-            from ..io import write_surface  # noqa: F401
-
-            fmt = "datx"
-        except ImportError:
-            fmt = "npz"
+    fmt = args.format or "datx"
     out = out_dir(args.out or Path("results") / tp.stem)
     res = simulate(
         tp,

@@ -454,6 +454,28 @@ def write_surface(
 
 
 def encode_surface(surface: Surface | Profile, format: str, **options: Any) -> bytes:
-    """Return the bytes of ``surface`` in ``format`` (no file is written)."""
+    """Return the content of ``surface`` encoded in ``format`` (no file is written).
+
+    Parameters
+    ----------
+    surface : Surface or Profile
+        Heights in m; a profile becomes a one-row surface with ``dy = dx``.
+    format : str
+        Writable format name or suffix (``"datx"``, ``".x3p"``, ...).
+    **options
+        Format-specific keyword options, as for :func:`write_surface`.
+
+    Returns
+    -------
+    bytes
+        The file content.
+
+    Raises
+    ------
+    UnsupportedFileFormatError
+        No writer for the format.
+    FileFormatError
+        The surface cannot be stored in that format.
+    """
     name = _resolve_name(format, _WRITERS, "writer")
     return _WRITERS[name].encode(as_surface(surface), **options)

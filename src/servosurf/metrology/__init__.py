@@ -1,52 +1,49 @@
 """Surface metrology: the Surface type, filters, roughness, spectra, form error.
 
-Axis convention: rows are y, columns are x (row 0 at the top of the image). All
-lengths are in m and spatial frequencies in 1/m.
+Axis convention: rows are y, columns are x; pixel (i, j) is centred at
+``(x0 + j dx, y0 + i dy)``. All lengths are in m and spatial frequencies in 1/m.
+
+Only :class:`Surface` and :class:`Profile` load eagerly; the analysis functions
+(scipy, scikit-image) load on first use, so reading a file stays quick.
 """
 
-from ._filters import gaussian_filter_1d, gaussian_filter_2d, high_pass
-from ._interferometer import INSTRUMENTS, Interferometer, load_instrument, measure
-from ._form import (
-    form_error_profile,
-    lenslet_centre_profile,
-    nominal_lenslet_profile,
-    nominal_lenslet_surface,
-)
-from ._lenslet import find_deepest_point, segment_lenslets
-from ._register import register_translation, remove_form, resample, shift_surface
-from ._roughness import areal_roughness, iso4288_cutoff, profile_roughness
-from ._spectrum import find_peaks_spectrum, psd_1d
+from __future__ import annotations
+
+import importlib
+
 from ._surface import Profile, Surface
 
-__all__ = [
-    "Surface",
-    "Profile",
+_LAZY = {
     # filters (ISO 16610-21, -61)
-    "gaussian_filter_1d",
-    "gaussian_filter_2d",
-    "high_pass",
+    "gaussian_filter_1d": "._filters", "gaussian_filter_2d": "._filters",
+    "high_pass": "._filters",
     # roughness (ISO 4287, 4288, 25178-2)
-    "profile_roughness",
-    "areal_roughness",
-    "iso4288_cutoff",
+    "profile_roughness": "._roughness", "areal_roughness": "._roughness",
+    "iso4288_cutoff": "._roughness",
     # spectra
-    "psd_1d",
-    "find_peaks_spectrum",
+    "psd_1d": "._spectrum", "find_peaks_spectrum": "._spectrum",
     # lenslet form
-    "nominal_lenslet_profile",
-    "nominal_lenslet_surface",
-    "form_error_profile",
-    "lenslet_centre_profile",
-    "find_deepest_point",
-    "segment_lenslets",
+    "nominal_lenslet_profile": "._form", "nominal_lenslet_surface": "._form",
+    "form_error_profile": "._form", "lenslet_centre_profile": "._form",
+    "find_deepest_point": "._lenslet", "segment_lenslets": "._lenslet",
     # registration and resampling
-    "register_translation",
-    "shift_surface",
-    "resample",
-    "remove_form",
+    "register_translation": "._register", "shift_surface": "._register",
+    "resample": "._register", "remove_form": "._register",
     # interferometer model
-    "Interferometer",
-    "INSTRUMENTS",
-    "load_instrument",
-    "measure",
-]
+    "Interferometer": "._interferometer", "INSTRUMENTS": "._interferometer",
+    "load_instrument": "._interferometer", "measure": "._interferometer",
+}
+
+__all__ = ["Surface", "Profile", *_LAZY]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'servosurf.metrology' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

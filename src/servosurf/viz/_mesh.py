@@ -6,8 +6,6 @@ trimesh is imported inside the functions that need it, never at package import.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -225,15 +223,8 @@ def write_mesh(
     data = mesh.export(file_type=fmt)
     if isinstance(data, str):  # pragma: no cover - ASCII encodings only
         data = data.encode()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{path.stem}.", suffix=f".{fmt}", dir=path.parent
-    )
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from .._atomic import atomic_path
+
+    with atomic_path(path, suffix=f".{fmt}") as tmp:
+        tmp.write_bytes(data)
     return path

@@ -17,12 +17,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
-import os
 import subprocess
 import sys
-import tempfile
 import warnings
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
@@ -90,17 +87,11 @@ def _offscreen_problem() -> str | None:
     return None
 
 
-@contextlib.contextmanager
-def _atomic_png(path: Path) -> Iterator[Path]:
-    """Yield a temporary ``.png`` path next to ``path``; move it into place on exit."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+def _atomic_png(path: Path):
+    """Temporary ``.png`` path next to ``path``, moved into place on success."""
+    from .._atomic import atomic_path
+
+    return atomic_path(path, suffix=".png")
 
 
 def _stride(shape: tuple[int, int], max_points: int) -> int:

@@ -12,7 +12,6 @@ spatial frequencies in 1/mm. Inputs are SI (m, 1/m, m^3, m/s).
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -53,21 +52,11 @@ def _new_figure(figsize: tuple[float, float]) -> Any:
 
 def _save_atomic(fig: Any, path: str | os.PathLike[str], dpi: int) -> Path:
     """Write ``fig`` as PNG to ``path`` via a temporary file and os.replace."""
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    folder.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format="png", dpi=dpi)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    from .._atomic import atomic_path
+
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi)
+    return Path(path)
 
 
 def _unit(unit: str) -> float:
