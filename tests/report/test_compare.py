@@ -44,3 +44,25 @@ def test_identical_maps_are_a_perfect_fit(lens_map):
     np.testing.assert_allclose(out["shift_px"], [0, 0], atol=0.01)
     assert out["rms_residual_m"] < 1e-12
     assert out["fit_percent"] == pytest.approx(100.0, abs=1e-6)
+
+
+def test_compare_cli_files(lens_map, tmp_path, capsys):
+    import json
+
+    from servosurf.cli import main
+    from servosurf.io import write_surface
+
+    rng = np.random.default_rng(3)
+    moved = shift_surface(lens_map, 1.3e-6, 0.4e-6)
+    moved = moved.replace(z=moved.z + rng.normal(0, 1e-9, moved.shape))
+    write_surface(moved, tmp_path / "measured.x3p")
+    write_surface(lens_map, tmp_path / "sim.datx")
+    rc = main(["compare", str(tmp_path / "measured.x3p"), "--simulated",
+               str(tmp_path / "sim.datx"), "--out", str(tmp_path / "c"), "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(out["shift_px"], [1.3, 0.4], atol=SHIFT_PX_TOL)
+    for name in ("residual.png", "spectra.png", "profiles.png", "compare.json"):
+        assert (tmp_path / "c" / name).stat().st_size > 0
+    assert main(["compare", str(tmp_path / "nope.x3p"), "--simulated",
+                 str(tmp_path / "sim.datx"), "--out", str(tmp_path / "c2")]) == 1
