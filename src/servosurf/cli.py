@@ -28,6 +28,7 @@ COMMANDS = (
     "paper",
     "identify",
     "simulate",
+    "face",
     "info",
     "convert",
     "profile",

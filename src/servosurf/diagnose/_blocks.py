@@ -9,16 +9,16 @@ registration) profiled out by projection. The model-selection code only ever see
 Noise models (fixed when a block is built; blocks are rebuilt after every accepted
 term so that accepted lines, modes and noise shapes enter the weighting):
 
-* following error: stationary Gaussian with the synthesised PSD (paper Eq 10)
-  plus accepted lines; idle records use the Whittle likelihood of the averaged
-  periodogram (deviance residuals), commanded records the frequency-domain GLS of
-  the deterministic residual;
+* following error: stationary Gaussian with the synthesised PSD (paper Eq 10);
+  idle records use the Whittle likelihood of the averaged periodogram (deviance
+  residuals, lines as power), commanded records the frequency-domain GLS of the
+  deterministic residual (lines as sinusoids of free phase, projected out);
 * FRF: complex log-ratio with a constant relative noise estimated from the data
   (robust second differences), floor 1e-3;
 * cut force: white, level estimated from the data, floor 1e-4 of the peak force;
 * maps and profiles: tool vibration (the synthesised real-error PSD) shared by
   all points cut at the same instant, plus white instrument noise estimated from
-  the data (floor 0.05 nm).
+  the data (floor 0.05 nm); lines as sinusoids of the pass time, projected out.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ import scipy.sparse  # noqa: F401  (sp.sparse)
 
 from ._sim import CaseModel, ModelParams
 
-__all__ = ["Block", "SpectralBlock", "TimeBlock", "CutBlock", "FRFBlock",
-           "PointsBlock", "Context", "line_power"]
+__all__ = ["Block", "SpectralBlock", "TimeBlock", "CutBlock", "ForceBlock",
+           "FRFBlock", "PointsBlock", "Context", "line_power"]
 
 #: Residual returned when the simulated loop diverges (huge but finite).
 _DIVERGED = 1e6
@@ -86,18 +86,11 @@ def line_power(case: CaseModel, p: ModelParams, freq: np.ndarray, n: int,
     return out
 
 
-def line_autocov(case: CaseModel, p: ModelParams, lags: np.ndarray,
-                 output: str = "tool") -> np.ndarray:
-    """Autocovariance (m^2) of ``p``'s lines in ``output`` at ``lags`` (s)."""
-    out = np.zeros(np.shape(lags))
-    if not len(p.line_frequencies):
-        return out
+def _line_amplitudes(case: CaseModel, p: ModelParams, output: str) -> np.ndarray:
+    """Amplitudes (m) of ``p``'s base lines in ``output`` (``fe`` or ``tool``)."""
     f0 = np.asarray(p.line_frequencies, dtype=float)
-    a = np.asarray(p.line_amplitudes, dtype=float)
     h = case.paths(p, f0)[("base", output)]
-    for j in range(f0.size):
-        out += 0.5 * (a[j] * abs(h[j])) ** 2 * np.cos(2 * np.pi * f0[j] * lags)
-    return out
+    return np.asarray(p.line_amplitudes, dtype=float) * np.abs(h)
 
 
 class Context:
@@ -243,15 +236,57 @@ class SpectralBlock(Block):
 
 
 def _whiten_weights(ctx: Context, p: ModelParams, freq: np.ndarray, n: int):
-    s = ctx.case.noise_psd(p, freq, "fe") + line_power(ctx.case, p, freq, n)
+    s = ctx.case.noise_psd(p, freq, "fe")
     return 1.0 / np.sqrt(np.maximum(s, 1e-300) * n * ctx.case.fs / 4.0)
+
+
+def _remove_lines(w: np.ndarray, cols: list[tuple[np.ndarray, np.ndarray]],
+                  amps: np.ndarray, sweeps: int = 3) -> np.ndarray:
+    """Subtract sinusoids of known amplitude and free phase from ``w``.
+
+    ``cols[j] = (c1, c2)`` are the whitened unit cosine and sine of line j, its
+    model ``A_j (cos(phi) c1 - sin(phi) c2)``; the phases minimise the sum of
+    squares (coordinate descent over lines, a 96-point scan refined by a parabola).
+    """
+    if not cols:
+        return w
+    phis = np.linspace(0.0, 2 * np.pi, 96, endpoint=False)
+    cp, sp_ = np.cos(phis), np.sin(phis)
+    models = [np.zeros_like(w) for _ in cols]
+    r = w.copy()
+    for _ in range(sweeps if len(cols) > 1 else 1):
+        for j, ((c1, c2), a) in enumerate(zip(cols, amps, strict=True)):
+            r = r + models[j]
+            a1, a2 = float(r @ c1), float(r @ c2)
+            g11, g22, g12 = float(c1 @ c1), float(c2 @ c2), float(c1 @ c2)
+            f = -2 * a * (cp * a1 - sp_ * a2) + a * a * (cp * cp * g11 - 2 * sp_ * cp
+                                                          * g12 + sp_ * sp_ * g22)
+            k = int(np.argmin(f))
+            fm, f0, fp = f[k - 1], f[k], f[(k + 1) % f.size]
+            den = fm - 2 * f0 + fp
+            phi = phis[k] + (0.5 * (fm - fp) / den if den > 0 else 0.0) * (
+                phis[1] - phis[0])
+            models[j] = a * (np.cos(phi) * c1 - np.sin(phi) * c2)
+            r = r - models[j]
+    return r
+
+
+def _project_out(w: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """``w`` minus its least-squares projection on the columns ``cols``."""
+    if cols.shape[1] == 0:
+        return w
+    q, _ = np.linalg.qr(cols)
+    return w - q @ (q.T @ w)
 
 
 class TimeBlock(Block):
     """Following-error records with a command and/or an external force.
 
     Residual: frequency-domain GLS of ``fe_measured - fe_simulated(p)`` with the
-    noise PSD of the model the block was built at.
+    noise PSD of the model the block was built at. Base-vibration lines of ``p``
+    are deterministic sinusoids of free amplitude and phase in each record (their
+    amplitude is set by the idle spectra); they are projected out, so a long record
+    pins their frequency.
     """
 
     def __init__(self, ctx: Context, name: str, records: list[dict], fs: float,
@@ -270,7 +305,7 @@ class TimeBlock(Block):
             tot += 2 * int(keep.sum())
         super().__init__(recording=name, kind="following-error", domain="time", n=tot)
 
-    tags = ("linear", "nonlin")
+    tags = ("linear", "nonlin", "lines")
 
     def predict(self, p: ModelParams, i: int) -> dict:
         """Simulated record i under ``p`` (dict of the simulator)."""
@@ -288,10 +323,30 @@ class TimeBlock(Block):
         """Unwhitened residual of record i in m."""
         return self.records[i]["fe"] - self.predict(p, i)["fe"]
 
+    def whitened(self, p: ModelParams, i: int) -> np.ndarray:
+        """Whitened residual spectrum of record i (complex, lines projected out)."""
+        keep, w, _ = self.meta[i]
+        x = np.fft.rfft(self.residual_time(p, i))[keep] * w
+        if len(p.line_frequencies):
+            n = self.records[i]["fe"].size
+            t = self.records[i].get("t0", 0.0) + np.arange(n) / self.fs
+            cols = []
+            for f0 in p.line_frequencies:
+                pair = []
+                for fn in (np.cos, np.sin):
+                    c = np.fft.rfft(fn(2 * np.pi * f0 * t))[keep] * w
+                    pair.append(np.concatenate([c.real, c.imag]))
+                cols.append(tuple(pair))
+            amps = _line_amplitudes(self.ctx.case, p, "fe")
+            v = _remove_lines(np.concatenate([x.real, x.imag]), cols, amps)
+            m = x.size
+            x = v[:m] + 1j * v[m:]
+        return x
+
     def residual(self, p: ModelParams) -> np.ndarray:
         out = []
-        for i, (keep, w, _) in enumerate(self.meta):
-            x = np.fft.rfft(self.residual_time(p, i))[keep] * w
+        for i in range(len(self.meta)):
+            x = self.whitened(p, i)
             out.append(x.real)
             out.append(x.imag)
         return _finite(np.concatenate(out))
@@ -300,14 +355,15 @@ class TimeBlock(Block):
         """Whitened residual of record i as a time series (~ N(0, 1) samples)."""
         keep, w, _ = self.meta[i]
         n = self.records[i]["fe"].size
-        x = np.fft.rfft(self.residual_time(p, i))
-        y = np.zeros_like(x)
-        y[keep] = x[keep] * w * np.sqrt(n / 2.0)
+        y = np.zeros(n // 2 + 1, dtype=complex)
+        y[keep] = self.whitened(p, i) * np.sqrt(n / 2.0)
         return np.fft.irfft(y, n)
 
 
 class CutBlock(TimeBlock):
     """A cut: following error (GLS as :class:`TimeBlock`) of the toolpath cut."""
+
+    tags = SIM_TAGS + ("lines",)
 
     def __init__(self, ctx: Context, name: str, data: dict, p_noise: ModelParams) -> None:
         """Build from a cut recording (``fs``, ``t``, ``fe``; loop at rest at t[0])."""
@@ -324,7 +380,7 @@ class CutBlock(TimeBlock):
                               "the controller rate")
         self.k0 = int(idx[0])
         self.n_sim = int(idx.size)
-        rec = {"fe": np.asarray(data["fe"], dtype=float)}
+        rec = {"fe": np.asarray(data["fe"], dtype=float), "t0": self.k0 / fs}
         super().__init__(ctx, name, [rec], fs, p_noise)
         self.kind = "cut"
 
@@ -425,7 +481,7 @@ def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
     r = ctx.memo((p.key(("linear", "sensor_noise")), "toolcov"), table)
     k = np.abs(np.asarray(lags)) * fs
     out = np.interp(k, np.arange(r.size), r, right=0.0)
-    return out + line_autocov(ctx.case, p, lags, "tool")
+    return out
 
 
 class PointsBlock(Block):
@@ -447,7 +503,7 @@ class PointsBlock(Block):
         ``(shape, flat_index)`` of a map, for pictures.
     """
 
-    tags = ("linear", "nonlin", "force", "path", "tool")
+    tags = ("linear", "nonlin", "force", "path", "tool", "lines")
 
     def __init__(self, ctx: Context, name: str, kind: str, x: np.ndarray,
                  y: np.ndarray, z: np.ndarray, p0: ModelParams, grid=None,
@@ -615,7 +671,7 @@ class PointsBlock(Block):
 
         def run():
             return surface_heights(self.ctx.case, self.pts, p, self.ctx.trajectory(p))
-        return self.ctx.memo((p.key(self.tags), "pts", id(self)), run)
+        return self.ctx.memo((p.key(self.tags[:-1]), "pts", id(self)), run)
 
     def predict_all(self, p: ModelParams) -> np.ndarray:
         """Model heights at every point of the recording (m)."""
@@ -623,14 +679,43 @@ class PointsBlock(Block):
 
         return surface_heights(self.ctx.case, self.pts_all, p, self.ctx.trajectory(p))
 
+    def _line_cols(self, p: ModelParams) -> list:
+        """Whitened cos/sin pairs of the lines at the pass times (tool vibration)."""
+        out = []
+        for f0 in p.line_frequencies:
+            c = np.zeros((self.z.size, 2))
+            c[self.cut, 0] = np.cos(2 * np.pi * f0 * self.tpass[self.cut])
+            c[self.cut, 1] = np.sin(2 * np.pi * f0 * self.tpass[self.cut])
+            wc = self._whiten(c)
+            wc = wc - self.q @ (self.q.T @ wc)
+            out.append((wc[:, 0], wc[:, 1]))
+        return out
+
     def residual(self, p: ModelParams) -> np.ndarray:
         w = self._whiten(self.z - self._predict(p))
         w = w - self.q @ (self.q.T @ w)
+        if len(p.line_frequencies):
+            w = _remove_lines(w, self._line_cols(p),
+                              _line_amplitudes(self.ctx.case, p, "tool"))
         return _finite(w)
 
     def nuisance_fit(self, p: ModelParams) -> np.ndarray:
-        """Unwhitened residual with the fitted nuisance removed (m), kept points."""
+        """Unwhitened residual with the fitted nuisance and lines removed (m).
+
+        Piston, tilt, registration and the sinusoids of ``p``'s lines at the pass
+        times are fitted by GLS and subtracted; kept points only.
+        """
         r = self.z - self._predict(p)
-        wx = self._whiten(self.X_raw)
-        coef, *_ = np.linalg.lstsq(wx, self._whiten(r), rcond=None)
-        return r - self.X_raw @ coef
+        x = self.X_raw
+        if len(p.line_frequencies):
+            # the fitted sinusoids: the difference between the residual before and
+            # after the known-amplitude line removal, mapped back by least squares
+            cols = []
+            for f0 in p.line_frequencies:
+                for fn in (np.cos, np.sin):
+                    c = np.zeros(self.z.size)
+                    c[self.cut] = fn(2 * np.pi * f0 * self.tpass[self.cut])
+                    cols.append(c)
+            x = np.column_stack([x] + cols)
+        coef, *_ = np.linalg.lstsq(self._whiten(x), self._whiten(r), rcond=None)
+        return r - x @ coef

@@ -13,7 +13,9 @@
    found and nothing selected: ``consistent``; terms selected and nothing left:
    ``explained``; terms selected and something left: ``partly-explained``
    (``unexplained`` when the terms explain less than 30 % of the mismatch);
-   nothing selected but a mismatch: ``unexplained``, with where it is.
+   nothing selected but a mismatch: ``unexplained``, with where it is. A
+   recalibration (moving mass, flexure, force constant) is reported as such but
+   is not an explanation by missing physics: alone it gives ``unexplained``.
 """
 
 from __future__ import annotations
@@ -441,7 +443,14 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
         progress(f"located {len(mism)} mismatches")
     loc = _locations(case, blocks0, mism, ctx)
     effs = list(effects) if effects is not None else list(CATALOGUE)
-    eng = Engine(blocks0, loc, effs, lambda p: _rebuild(blocks0, ctx, man, p))
+    def relocate(p, blocks):
+        new = _locations(case, blocks, locate(blocks, p, refs), ctx)
+        new.current_levels = loc.current_levels or new.current_levels
+        new.line_freqs = list(dict.fromkeys(new.line_freqs + loc.line_freqs))[:16]
+        return new
+
+    eng = Engine(blocks0, loc, effs, lambda p: _rebuild(blocks0, ctx, man, p),
+                 relocate)
     p, terms, ranking = eng.run(max_terms=max_terms, progress=progress)
     blocks1 = _rebuild(blocks0, ctx, man, p)
     rem = locate(blocks1, p, refs)
@@ -481,8 +490,10 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
     recal_d = [_term_dict(t, p, loc, fb, fa) for t in recal]
     remainder = bool(rem)
     tentative: list = []
-    if not terms:
-        verdict = "unexplained" if remainder else "consistent"
+    if not phys:
+        # recalibration alone is not an explanation by the catalogue of physics:
+        # report it, but call the mismatch unexplained
+        verdict = "unexplained" if (remainder or recal) else "consistent"
     elif not remainder:
         verdict = "explained"
     else:

@@ -79,7 +79,7 @@ def _timeseries(b: TimeBlock, d, force: ForceBlock | None, path: Path) -> Path:
         r = b.residual_time(p, 0)
         ax[0].plot(t, r * 1e9, color=c, lw=0.5, label=f"residual {lab}")
         _, w, f = b.meta[0]
-        x = np.fft.rfft(r)[b.meta[0][0]] * w
+        x = b.whitened(p, 0)
         fc, e = _bands(f, np.abs(x) ** 2)
         ax[1].semilogx(fc, e, "o-" if lab == "after" else "s--", color=c, ms=3,
                        label=f"whitened power {lab}")

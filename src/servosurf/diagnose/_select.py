@@ -75,13 +75,18 @@ class Engine:
         Candidate modules.
     rebuild : callable
         ``rebuild(p) -> blocks``: the blocks with their noise model at ``p``.
+    relocate : callable, optional
+        ``relocate(p, blocks) -> Locations``: grids placed on the residual left
+        by ``p`` (new lines, modes and orders after a term is accepted).
     """
 
-    def __init__(self, blocks, loc: Locations, effects, rebuild) -> None:
+    def __init__(self, blocks, loc: Locations, effects, rebuild,
+                 relocate=None) -> None:
         self.blocks = list(blocks)
         self.loc = loc
         self.effects = list(effects)
         self.rebuild = rebuild
+        self.relocate = relocate
         self._cache: dict = {}
         self.n_total = int(sum(b.n for b in self.blocks))
         self.log = []
@@ -241,6 +246,51 @@ class Engine:
             pass
         return from_x(x0)
 
+    def _span(self, b) -> float:
+        """Longest coherent time span (s) of a block (for line frequency grids)."""
+        if hasattr(b, "tpass"):
+            t = b.tpass[np.isfinite(b.tpass)]
+            return float(np.ptp(t)) if t.size else 0.0
+        if hasattr(b, "records"):
+            return max(r["fe"].size for r in b.records) / b.fs
+        return 0.0
+
+    def line_frequency_search(self, p: ModelParams, term: Term) -> ModelParams:
+        """Grid search of a line's frequency before the local fit.
+
+        The deviance of long coherent records oscillates in frequency with period
+        ``1/T``; a local solver started a bin away would stop in a side minimum.
+        Stage 1 scans +-1.5 idle bins at ``1/(4 T)`` of the time records; stage 2
+        refines at ``1/(8 T)`` of the longest map or profile.
+        """
+        i = term.slot
+        f0 = p.line_frequencies[i]
+        df = self.loc.fs / self.loc.record_length
+
+        def with_f(f):
+            t = list(p.line_frequencies)
+            t[i] = float(f)
+            return p.replace(line_frequencies=tuple(t))
+
+        time_blocks = [k for k, b in enumerate(self.blocks) if hasattr(b, "records")
+                       or b.domain == "spectrum"]
+        all_blocks = list(range(len(self.blocks)))
+
+        def dev(q, which):
+            return sum(float(r @ r) for r in (self.block_residual(k, q) for k in which))
+
+        spans = [self._span(self.blocks[k]) for k in time_blocks]
+        t1 = max([s for s in spans if s > 0] or [1.0 / df])
+        grid = np.arange(f0 - 1.5 * df, f0 + 1.5 * df, 1.0 / (4 * t1))
+        best = min(grid, key=lambda f: dev(with_f(f), time_blocks))
+        t2 = max([self._span(b) for b in self.blocks] + [t1])
+        if t2 > 1.5 * t1:
+            fine = np.arange(best - 1.0 / (4 * t1), best + 1.0 / (4 * t1),
+                             1.0 / (8 * t2))
+            best = min(fine, key=lambda f: dev(with_f(f), all_blocks))
+        q = with_f(best)
+        return q if self.deviance(q) <= self.deviance(p) else p
+
     def line_search_1d(self, p: ModelParams, term: Term) -> ModelParams:
         """Golden-section search on a single (log) parameter: thresholded modules."""
         (f,) = term.effect.free(p, term.slot, self.loc, term.config)
@@ -306,6 +356,8 @@ class Engine:
                 tnew = Term(c.effect, slot, c.config)
                 if c.effect.name == "amplifier-saturation":
                     q = self.line_search_1d(q, tnew)
+                if c.effect.name == "base-vibration-lines":
+                    q = self.line_frequency_search(q, tnew)
                 q = self.fit(q, terms + [tnew], only_last=True)
                 if terms:
                     q = self.fit(q, terms + [tnew])
@@ -325,6 +377,12 @@ class Engine:
             terms.append(tnew)
             self.blocks = self.rebuild(p)
             self._cache.clear()
+            # relinearise: refit every accepted term under the rebuilt weighting, so
+            # that later candidates are not credited with this improvement
+            p = self.fit(p, terms)
+            # locate again on what is left: new lines, modes, orders to try
+            if self.relocate is not None:
+                self.loc = self.relocate(p, self.blocks)
         p, terms = self.prune(p, terms)
         return p, terms, ranking or []
 

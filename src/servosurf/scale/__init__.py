@@ -14,6 +14,7 @@ from ._face import (
     simulate_face,
 )
 from ._memory import reuse_freed_memory
+from ._vibration import MemmapDeviation, write_vibration
 
 __all__ = [
     "simulate_face",
@@ -23,4 +24,6 @@ __all__ = [
     "FaceResult",
     "IndexNoise",
     "reuse_freed_memory",
+    "MemmapDeviation",
+    "write_vibration",
 ]
