@@ -272,7 +272,7 @@ def _locations(case: CaseModel, blocks, mism: list[Mismatch], ctx: Context) -> L
     for mm in mism:
         f = mm.details.get("frequency_hz")
         if mm.test == "line" and f is not None:
-            lines.append(f)
+            lines.append((mm.significance, f))
         if f is not None and f > 500 and mm.domain in ("frf", "time", "spectrum"):
             modes.append(f)
         if "band_hz" in mm.details and mm.domain in ("frf", "spectrum", "time"):
@@ -300,8 +300,8 @@ def _locations(case: CaseModel, blocks, mism: list[Mismatch], ctx: Context) -> L
             uniq.append(f)
     loc.mode_freqs = uniq[:8]
     lu = []
-    for f in sorted(set(lines)):
-        if all(abs(f - g) > 2 * case.fs / rec_len for g in lu):
+    for _sig, f in sorted(lines, key=lambda v: -v[0]):
+        if all(abs(f - g) > 1.0 for g in lu):
             lu.append(f)
     loc.line_freqs = lu[:16]
     loc.orders = list(dict.fromkeys(orders + [1, 2, 3]))[:8]
