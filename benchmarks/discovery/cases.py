@@ -9,6 +9,8 @@ cutting the 5 um lenslets of ``toolpaths/lenslet_5um.toml``):
 
 * ``idle.npz``: 32 idle following-error records of 4096 samples (paper 4.1);
 * ``aircut.npz``: following error of the lenslet command with the tool retracted;
+* ``aircut_b.csv``: the same air cut at a second FTS frequency (137 Hz, "speed B"),
+  CSV with ``command_m`` (full and quick campaigns);
 * ``cut.csv``: force and following error while cutting;
 * ``frf_ol.csv``, ``frf_cl.csv``, ``frf_force.csv``: open-loop (V/V), closed-loop
   (m/m) and force (m/N) FRFs with 1 % complex measurement noise;
@@ -51,21 +53,65 @@ FORCE_NOISE = 2e-3
 INSTRUMENT_NOISE = 0.1e-9
 
 CAMPAIGNS = {
-    "full": dict(idle_records=32, idle_len=4096, air_len=32768, cut_len=32768,
-                 frf_n=2000, surface=(480, 640), rings=3, profile_dx=2e-6),
-    "quick": dict(idle_records=16, idle_len=4096, air_len=16384, cut_len=16384,
-                  frf_n=800, surface=(300, 300), rings=2, profile_dx=4e-6),
+    "full": dict(
+        idle_records=32,
+        idle_len=4096,
+        air_len=32768,
+        cut_len=32768,
+        frf_n=2000,
+        surface=(480, 640),
+        speed_b=137.0,
+        rings=3,
+        profile_dx=2e-6,
+    ),
+    "quick": dict(
+        idle_records=16,
+        idle_len=4096,
+        air_len=16384,
+        cut_len=16384,
+        frf_n=800,
+        surface=(300, 300),
+        speed_b=137.0,
+        rings=2,
+        profile_dx=4e-6,
+    ),
+    "test": dict(
+        idle_records=16,
+        idle_len=4096,
+        air_len=8192,
+        cut_len=8192,
+        frf_n=800,
+        surface=(200, 260),
+        rings=1,
+        profile_dx=8e-6,
+    ),
 }
 
 #: Catalogue effects the generator injects (every module of the catalogue).
-EFFECTS = ("structural-mode", "loop-delay", "base-vibration-lines", "thermal-drift",
-           "flexure-stiffness-nonlinearity", "force-constant-position",
-           "amplifier-saturation", "sensor-nonlinearity", "sensor-noise-shape",
-           "tool-edge-waviness", "tool-radius-error", "cutting-force-coefficient",
-           "spindle-axial-error", "elastic-recovery")
+EFFECTS = (
+    "structural-mode",
+    "loop-delay",
+    "base-vibration-lines",
+    "thermal-drift",
+    "flexure-stiffness-nonlinearity",
+    "force-constant-position",
+    "amplifier-saturation",
+    "sensor-nonlinearity",
+    "sensor-noise-shape",
+    "tool-edge-waviness",
+    "tool-radius-error",
+    "cutting-force-coefficient",
+    "spindle-axial-error",
+    "elastic-recovery",
+)
 #: Effects outside the catalogue.
-OOL = ("bouc-wen-hysteresis", "quadratic-damping", "coulomb-friction",
-       "opposite-sign-mode", "sensor-1/f-noise")
+OOL = (
+    "bouc-wen-hysteresis",
+    "quadratic-damping",
+    "coulomb-friction",
+    "opposite-sign-mode",
+    "sensor-1/f-noise",
+)
 
 
 # ------------------------------------------------------------------ the case model
@@ -82,8 +128,9 @@ def base_case() -> CaseModel:
 
 # ------------------------------------------------------------------ OOL kernel
 @njit(cache=False)
-def _ool_loop(ad, bd, cx, ac, bc, cc, dc, sens, nd, frac, r, kt, radius, chip, kind,
-              par, bl, out):
+def _ool_loop(
+    ad, bd, cx, ac, bc, cc, dc, sens, nd, frac, r, kt, radius, chip, kind, par, bl, out
+):
     """Loop with an out-of-catalogue force on the coil carrier (m2).
 
     kind 1: Bouc-Wen hysteresis ``F = -par0 z``, ``z' = v - par1 |v| z - par2 v |z|``;
@@ -130,8 +177,10 @@ def _ool_loop(ad, bd, cx, ac, bc, cc, dc, sens, nd, frac, r, kt, radius, chip, k
                 if d > radius:
                     d = radius
                 h = radius - d
-                f = kt * (radius * radius * math.acos(h / radius)
-                          - h * math.sqrt(max(2.0 * radius * d - d * d, 0.0)))
+                f = kt * (
+                    radius * radius * math.acos(h / radius)
+                    - h * math.sqrt(max(2.0 * radius * d - d * d, 0.0))
+                )
         fx = 0.0
         if kind == 1:
             fx = -par[0] * zbw
@@ -160,15 +209,32 @@ def ool_simulate(case: CaseModel, ool: dict, ref: np.ndarray, chip: bool) -> dic
     cx6 = np.zeros((6, cx.shape[1]))
     cx6[:5] = cx
     cx6[5, 7] = 1.0  # v2 (mechanics velocity of the carrier)
-    kind = {"bouc-wen-hysteresis": 1, "quadratic-damping": 2,
-            "coulomb-friction": 3}[ool["kind"]]
+    kind = {"bouc-wen-hysteresis": 1, "quadratic-damping": 2, "coulomb-friction": 3}[
+        ool["kind"]
+    ]
     par = np.asarray(ool["par"], dtype=float)
     out = np.zeros((3, ref.size))
     m = case.machine
-    _ool_loop(ad, bd, cx6, ac, bc, cc, dc, m.sensor.sensitivity, nd, frac,
-              np.ascontiguousarray(ref, dtype=float), case.kt(ModelParams()),
-              case.tool_radius(), 1 if chip else 0, kind, par,
-              m.actuator.force_constant, out)
+    _ool_loop(
+        ad,
+        bd,
+        cx6,
+        ac,
+        bc,
+        cc,
+        dc,
+        m.sensor.sensitivity,
+        nd,
+        frac,
+        np.ascontiguousarray(ref, dtype=float),
+        case.kt(ModelParams()),
+        case.tool_radius(),
+        1 if chip else 0,
+        kind,
+        par,
+        m.actuator.force_constant,
+        out,
+    )
     return {"tool": out[0], "fe": out[1], "force": out[2]}
 
 
@@ -180,8 +246,16 @@ def _source_psds(case: CaseModel, p: ModelParams, f: np.ndarray, ool: dict | Non
     return w
 
 
-def noise_records(case: CaseModel, p: ModelParams, n: int, rng, *, count: int = 1,
-                  ool=None, outputs=("fe",)) -> dict:
+def noise_records(
+    case: CaseModel,
+    p: ModelParams,
+    n: int,
+    rng,
+    *,
+    count: int = 1,
+    ool=None,
+    outputs=("fe",),
+) -> dict:
     """Periodic Gaussian realisations of the stochastic errors, plus the lines.
 
     Each source gets random Fourier coefficients of variance ``W n fs / 2`` above
@@ -194,15 +268,19 @@ def noise_records(case: CaseModel, p: ModelParams, n: int, rng, *, count: int = 
     fb = f[band]
     ps = case.paths(p, fb)
     w = _source_psds(case, p, fb, ool)
-    inp = {"sensor_noise": "sensor_noise", "current_noise": "current_noise",
-           "base": "base"}
+    inp = {
+        "sensor_noise": "sensor_noise",
+        "current_noise": "current_noise",
+        "base": "base",
+    }
     out = {o: np.zeros((count, n)) for o in outputs}
     t = np.arange(n) / fs
     for c in range(count):
         spec = {o: np.zeros(f.size, dtype=complex) for o in outputs}
         for name, wk in w.items():
-            g = (rng.standard_normal(fb.size) + 1j * rng.standard_normal(fb.size)) \
-                / math.sqrt(2.0)
+            g = (
+                rng.standard_normal(fb.size) + 1j * rng.standard_normal(fb.size)
+            ) / math.sqrt(2.0)
             x = np.sqrt(wk * n * fs / 2.0) * g
             for o in outputs:
                 spec[o][band] += ps[(inp[name], o)] * x
@@ -215,21 +293,28 @@ def noise_records(case: CaseModel, p: ModelParams, n: int, rng, *, count: int = 
                 ph = rng.uniform(0, 2 * np.pi)
                 for o in outputs:
                     hh = h[("base", o)][j]
-                    out[o][c] += p.line_amplitudes[j] * abs(hh) * np.cos(
-                        2 * np.pi * f0[j] * t + ph + np.angle(hh))
+                    out[o][c] += (
+                        p.line_amplitudes[j]
+                        * abs(hh)
+                        * np.cos(2 * np.pi * f0[j] * t + ph + np.angle(hh))
+                    )
     return out
 
 
-def fe_noise_rms(case: CaseModel, p: ModelParams, n: int = 4096, ool=None,
-                 output: str = "fe") -> float:
+def fe_noise_rms(
+    case: CaseModel, p: ModelParams, n: int = 4096, ool=None, output: str = "fe"
+) -> float:
     """RMS (m) of the stochastic part of ``output`` (no lines)."""
     fs = case.fs
     f = np.fft.rfftfreq(n, 1.0 / fs)[1:]
     f = f[(f >= fs / 4096 * (1 - 1e-9)) & (f < fs / 2)]
     ps = case.paths(p, f)
     w = _source_psds(case, p, f, ool)
-    inp = {"sensor_noise": "sensor_noise", "current_noise": "current_noise",
-           "base": "base"}
+    inp = {
+        "sensor_noise": "sensor_noise",
+        "current_noise": "current_noise",
+        "base": "base",
+    }
     s = sum(wk * np.abs(ps[(inp[k], output)]) ** 2 for k, wk in w.items())
     return float(math.sqrt(np.sum(s) * fs / n))
 
@@ -248,8 +333,9 @@ def path_terms(p: ModelParams, t, theta, z):
     if p.drift_amplitude:
         dz = dz + p.drift_amplitude * (1 - np.exp(-t / p.drift_time_constant))
     dz = dz + p.drift_rate * t
-    for h, a, ph in zip(p.spindle_orders, p.spindle_amplitudes, p.spindle_phases,
-                        strict=True):
+    for h, a, ph in zip(
+        p.spindle_orders, p.spindle_amplitudes, p.spindle_phases, strict=True
+    ):
         dz = dz + a * np.cos(h * theta + ph)
     return dz
 
@@ -280,8 +366,11 @@ def tool_series(case: CaseModel, p: ModelParams, ool, t_max: float) -> tuple:
     n = int(round(0.12 * fs))
     t = np.arange(n) / fs
     ref = case.toolpath.path.z_at(t)
-    if ool and ool["kind"] in ("bouc-wen-hysteresis", "quadratic-damping",
-                               "coulomb-friction"):
+    if ool and ool["kind"] in (
+        "bouc-wen-hysteresis",
+        "quadratic-damping",
+        "coulomb-friction",
+    ):
         x1 = ool_simulate(case, ool, ref, True)["tool"]
     else:
         x1 = case.simulate_path(p, t)["tool"]
@@ -294,14 +383,23 @@ def deterministic(case: CaseModel, p: ModelParams, ool, campaign: dict) -> dict:
     fs = case.fs
     spec = case.toolpath
     out = {}
-    nonlin_ool = ool and ool["kind"] in ("bouc-wen-hysteresis", "quadratic-damping",
-                                         "coulomb-friction")
+    nonlin_ool = ool and ool["kind"] in (
+        "bouc-wen-hysteresis",
+        "quadratic-damping",
+        "coulomb-friction",
+    )
     ta = np.arange(campaign["air_len"]) / fs
     ref = spec.path.z_at(ta)
     if nonlin_ool:
         out["air"] = ool_simulate(case, ool, ref, False)["fe"]
     else:
         out["air"] = case.simulate(p, reference=ref)["fe"]
+    if campaign.get("speed_b"):
+        ref_b = speed_b_command(ta, spec, campaign["speed_b"])
+        if nonlin_ool:
+            out["air_b"] = ool_simulate(case, ool, ref_b, False)["fe"]
+        else:
+            out["air_b"] = case.simulate(p, reference=ref_b)["fe"]
     tc = np.arange(campaign["cut_len"]) / fs
     if nonlin_ool:
         c = ool_simulate(case, ool, spec.path.z_at(tc), True)
@@ -310,12 +408,25 @@ def deterministic(case: CaseModel, p: ModelParams, ool, campaign: dict) -> dict:
     out["cut_fe"], out["cut_force"] = c["fe"], c["force"]
     f = np.geomspace(20.0, 40e3, campaign["frf_n"])
     ps = case.paths(p, f)
-    out["frf"] = {"frf_ol": (f, ps["open_loop"]),
-                  "frf_cl": (f, ps[("reference", "sensor")]),
-                  "frf_force": (f, ps[("force", "sensor")])}
+    out["frf"] = {
+        "frf_ol": (f, ps["open_loop"]),
+        "frf_cl": (f, ps[("reference", "sensor")]),
+        "frf_force": (f, ps[("force", "sensor")]),
+    }
     traj = tool_series(case, p, ool, spec.path.duration)
     out["traj"] = traj
     return out
+
+
+def speed_b_command(t, spec, f_b: float):
+    """Air-cut command at a second FTS frequency ``f_b`` (Hz), same stroke.
+
+    DISCOVERY.md 5.1 "speed B": separates effects that scale with speed (inertial
+    force, saturation) from those that depend on position only (flexure).
+    """
+    path = spec.path
+    a = path.amplitude
+    return (a - path.depth_of_cut) - a * np.sin(2 * np.pi * f_b * t)
 
 
 def sweep_surface(case: CaseModel, p: ModelParams, traj, field, noise_fn=None):
@@ -378,25 +489,33 @@ def _field_windows(case, field):
     spec = case.toolpath
     path = spec.path
     x, y = field.coords()
-    th = np.arctan2(np.array([y[0], y[-1], y[0], y[-1]]),
-                    np.array([x[0], x[0], x[-1], x[-1]]))
+    th = np.arctan2(
+        np.array([y[0], y[-1], y[0], y[-1]]), np.array([x[0], x[0], x[-1], x[-1]])
+    )
     w = path.angular_speed
     t_rev = 2 * math.pi / w
     ph = np.mod(th - path.theta0, 2 * math.pi) / w
     lo, hi = ph.min(), ph.max()
     if hi - lo > math.pi / w:  # wraps
         lo, hi = 0.0, t_rev
-    return [(k * t_rev + lo - 1e-3, k * t_rev + hi + 1e-3) for k in range(path.ring_count)]
+    return [
+        (k * t_rev + lo - 1e-3, k * t_rev + hi + 1e-3) for k in range(path.ring_count)
+    ]
 
 
 def enr(case: CaseModel, p: ModelParams, ool, campaign: dict, nominal: dict) -> float:
     """Effect-to-noise ratio: max over recordings of effect RMS / noise RMS."""
     d = deterministic(case, p, ool, campaign)
     sig_fe = fe_noise_rms(case, ModelParams())
-    vals = [float(np.sqrt(np.mean((d["air"] - nominal["air"]) ** 2))) / sig_fe,
-            float(np.sqrt(np.mean((d["cut_fe"] - nominal["cut_fe"]) ** 2))) / sig_fe,
-            float(np.sqrt(np.mean((d["cut_force"] - nominal["cut_force"]) ** 2)))
-            / FORCE_NOISE]
+    vals = [
+        float(np.sqrt(np.mean((d["air"] - nominal["air"]) ** 2))) / sig_fe,
+        float(np.sqrt(np.mean((d["air_b"] - nominal["air_b"]) ** 2))) / sig_fe
+        if "air_b" in d
+        else 0.0,
+        float(np.sqrt(np.mean((d["cut_fe"] - nominal["cut_fe"]) ** 2))) / sig_fe,
+        float(np.sqrt(np.mean((d["cut_force"] - nominal["cut_force"]) ** 2)))
+        / FORCE_NOISE,
+    ]
     for k, (_f, h) in d["frf"].items():
         h0 = nominal["frf"][k][1]
         vals.append(float(np.sqrt(np.mean(np.abs(np.log(h / h0)) ** 2))) / FRF_NOISE)
@@ -458,19 +577,24 @@ def draw(effect: str, rng) -> tuple:
     if effect == "structural-mode":
         f = float(np.exp(rng.uniform(np.log(2500.0), np.log(30000.0))))
         z = float(np.exp(rng.uniform(np.log(0.01), np.log(0.05))))
-        return (lambda s: {"mode_frequency": f, "mode_damping": z, "mode_gain": s},
-                lambda s: {"frequency": f, "compliance": s}, 1e-10)
+        return (
+            lambda s: {"mode_frequency": f, "mode_damping": z, "mode_gain": s},
+            lambda s: {"frequency": f, "damping_ratio": z, "compliance": s},
+            1e-10,
+        )
     if effect == "loop-delay":
         sign = 1.0 if rng.uniform() < 0.75 else -1.0
-        return (lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs)
-                           if sign < 0 else s},
-                lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs)
-                           if sign < 0 else s}, 0.2 / case.fs)
+        return (
+            lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs) if sign < 0 else s},
+            lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs) if sign < 0 else s},
+            0.2 / case.fs,
+        )
     if effect == "base-vibration-lines":
         k = int(rng.integers(1, 4))
         if rng.uniform() < 0.5:
-            fr = sorted(rng.choice([50.0, 100.0, 150.0, 250.0, 350.0], k,
-                                   replace=False))
+            fr = sorted(
+                rng.choice([50.0, 100.0, 150.0, 250.0, 350.0], k, replace=False)
+            )
         else:
             fr = sorted(rng.uniform(60.0, 4000.0, k))
         rel = np.sort(rng.uniform(0.3, 1.0, k))[::-1]
@@ -479,18 +603,26 @@ def draw(effect: str, rng) -> tuple:
         order = np.argsort(-rel)
         fr = [fr[i] for i in order]
         rel = rel[order]
-        return (lambda s: {"line_frequencies": tuple(fr),
-                           "line_amplitudes": tuple(float(s * r) for r in rel)},
-                lambda s: {"frequency_1": fr[0], "amplitude_1": s}, 1e-9)
+        return (
+            lambda s: {
+                "line_frequencies": tuple(fr),
+                "line_amplitudes": tuple(float(s * r) for r in rel),
+            },
+            lambda s: {"frequency_1": fr[0], "amplitude_1": s},
+            1e-9,
+        )
     if effect == "thermal-drift":
         form = rng.choice(["exp", "lin", "both"])
         tau = float(rng.uniform(0.6, 3.0))
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
 
         def kn(s):
-            return {"drift_amplitude": sg * s if form != "lin" else 0.0,
-                    "drift_time_constant": tau,
-                    "drift_rate": -sg * s / 4.0 if form != "exp" else 0.0}
+            return {
+                "drift_amplitude": sg * s if form != "lin" else 0.0,
+                "drift_time_constant": tau,
+                "drift_rate": -sg * s / 4.0 if form != "exp" else 0.0,
+            }
+
         return kn, kn, 1e-9
     if effect == "flexure-stiffness-nonlinearity":
         form = rng.choice(["k2", "k3", "both"])
@@ -499,24 +631,37 @@ def draw(effect: str, rng) -> tuple:
         st = 15e-6
 
         def kn(s):
-            return {"flexure_k2": sg * s * k2 / st if form != "k3" else 0.0,
-                    "flexure_k3": sg * s * k2 / st**2 if form != "k2" else 0.0}
-        return (kn, lambda s: {"k_quadratic": kn(s)["flexure_k2"],
-                               "k_cubic": kn(s)["flexure_k3"]}, 1e-3)
+            return {
+                "flexure_k2": sg * s * k2 / st if form != "k3" else 0.0,
+                "flexure_k3": sg * s * k2 / st**2 if form != "k2" else 0.0,
+            }
+
+        return (
+            kn,
+            lambda s: {
+                "k_quadratic": kn(s)["flexure_k2"],
+                "k_cubic": kn(s)["flexure_k3"],
+            },
+            1e-3,
+        )
     if effect == "force-constant-position":
         form = rng.choice(["b1", "b2", "both"])
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
         st = 15e-6
 
         def kn(s):
-            return {"kf_b1": sg * s / st if form != "b2" else 0.0,
-                    "kf_b2": -s / st**2 if form != "b1" else 0.0}
+            return {
+                "kf_b1": sg * s / st if form != "b2" else 0.0,
+                "kf_b2": -s / st**2 if form != "b1" else 0.0,
+            }
+
         return (kn, lambda s: {"b1": kn(s)["kf_b1"], "b2": kn(s)["kf_b2"]}, 1e-3)
     if effect == "amplifier-saturation":
         peak = steady_peak_current(case)
 
         def kn(s):
             return {"max_current": peak * (1.0 - min(s, 0.95))}
+
         return kn, lambda s: {"max_current": kn(s)["max_current"]}, 0.02
     if effect == "sensor-nonlinearity":
         form = rng.choice(["a2", "a3", "both"])
@@ -524,8 +669,11 @@ def draw(effect: str, rng) -> tuple:
         st = 10e-6
 
         def kn(s):
-            return {"sensor_a2": sg * s / st if form != "a3" else 0.0,
-                    "sensor_a3": s / st**2 if form != "a2" else 0.0}
+            return {
+                "sensor_a2": sg * s / st if form != "a3" else 0.0,
+                "sensor_a3": s / st**2 if form != "a2" else 0.0,
+            }
+
         return kn, lambda s: {"a2": kn(s)["sensor_a2"], "a3": kn(s)["sensor_a3"]}, 1e-3
     if effect == "sensor-noise-shape":
         sn = m.disturbances.sensor_noise
@@ -535,30 +683,51 @@ def draw(effect: str, rng) -> tuple:
             if form == "floor":
                 return {"sensor_floor": sn.floor * (1.0 + s)}
             return {"sensor_corner": sn.corner * (1.0 + s)}
-        return (kn, lambda s: {"floor": sn.floor * (1 + s)} if form == "floor"
-                else {"corner": sn.corner * (1 + s)}, 0.1)
+
+        return (
+            kn,
+            lambda s: (
+                {"floor": sn.floor * (1 + s)}
+                if form == "floor"
+                else {"corner": sn.corner * (1 + s)}
+            ),
+            0.1,
+        )
     if effect == "tool-edge-waviness":
         v = rng.normal(size=4)
         v /= np.linalg.norm(v)
 
         def kn(s):
             return {"waviness": tuple(float(s * c) for c in v)}
+
         return kn, lambda s: {f"p{k + 3}": float(s * v[k]) for k in range(4)}, 1e-9
     if effect == "tool-radius-error":
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
-        return (lambda s: {"radius_error": sg * s},
-                lambda s: {"radius_error": sg * s}, 1e-6)
+        return (
+            lambda s: {"radius_error": sg * s},
+            lambda s: {"radius_error": sg * s},
+            1e-6,
+        )
     if effect == "cutting-force-coefficient":
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
         k0 = case.specific_force
-        return (lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))},
-                lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))}, 0.01)
+        return (
+            lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))},
+            lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))},
+            0.01,
+        )
     if effect == "spindle-axial-error":
         h = int(rng.integers(1, 13))
         ph = float(rng.uniform(-np.pi, np.pi))
-        return (lambda s: {"spindle_orders": (h,), "spindle_amplitudes": (s,),
-                           "spindle_phases": (ph,)},
-                lambda s: {"order_1": float(h), "amplitude_1": s}, 1e-9)
+        return (
+            lambda s: {
+                "spindle_orders": (h,),
+                "spindle_amplitudes": (s,),
+                "spindle_phases": (ph,),
+            },
+            lambda s: {"order_1": float(h), "amplitude_1": s},
+            1e-9,
+        )
     if effect == "elastic-recovery":
         return (lambda s: {"recovery": s}, lambda s: {"recovery": s}, 1e-3)
     raise KeyError(effect)
@@ -583,8 +752,11 @@ def draw_ool(kind: str, rng) -> tuple:
     k2 = case.machine.mechanics.k2
     if kind == "bouc-wen-hysteresis":
         az = float(rng.uniform(2e-6, 6e-6))
-        return (lambda s: {"kind": kind, "par": [s * k2, 0.5 / az, 0.5 / az]},
-                lambda s: {}, 0.01)
+        return (
+            lambda s: {"kind": kind, "par": [s * k2, 0.5 / az, 0.5 / az]},
+            lambda s: {},
+            0.01,
+        )
     if kind == "quadratic-damping":
         return (lambda s: {"kind": kind, "par": [s * 100.0]}, lambda s: {}, 0.1)
     if kind == "coulomb-friction":
@@ -592,8 +764,11 @@ def draw_ool(kind: str, rng) -> tuple:
     if kind == "opposite-sign-mode":
         f = float(np.exp(rng.uniform(np.log(3000.0), np.log(20000.0))))
         z = float(rng.uniform(0.01, 0.04))
-        return (lambda s: None, lambda s: {"mode_frequency": f, "mode_damping": z,
-                                           "mode_gain": -s}, 1e-10)
+        return (
+            lambda s: None,
+            lambda s: {"mode_frequency": f, "mode_damping": z, "mode_gain": -s},
+            1e-10,
+        )
     if kind == "sensor-1/f-noise":
         sn = case.machine.disturbances.sensor_noise
         return (lambda s: {"kind": kind, "par": [s * sn.level]}, lambda s: {}, 1.0)
@@ -649,8 +824,25 @@ def write_case(folder: Path, p: ModelParams, ool, campaign: dict, seed: int) -> 
     na = campaign["air_len"]
     air = d["air"] + noise_records(case, p, na, rng, ool=ool)["fe"][0]
     cmd = case.toolpath.path.z_at(np.arange(na) / fs)
-    np.savez(folder / "aircut.npz", fs_hz=fs, following_error_m=air[None],
-             command_m=cmd[None])
+    np.savez(
+        folder / "aircut.npz",
+        fs_hz=fs,
+        following_error_m=air[None],
+        command_m=cmd[None],
+    )
+    extra = ""
+    if "air_b" in d:
+        air_b = d["air_b"] + noise_records(case, p, na, rng, ool=ool)["fe"][0]
+        cmd_b = speed_b_command(np.arange(na) / fs, case.toolpath, campaign["speed_b"])
+        with open(folder / "aircut_b.csv", "w") as fh:
+            fh.write("time_s,following_error_m,command_m\n")
+            np.savetxt(
+                fh,
+                np.column_stack([np.arange(na) / fs, air_b, cmd_b]),
+                delimiter=",",
+                fmt="%.12g",
+            )
+        extra = '[[recording]]\npath = "aircut_b.csv"\nkind = "following-error"\n\n'
     # cut
     nc = campaign["cut_len"]
     fe = d["cut_fe"] + noise_records(case, p, nc, rng, ool=ool)["fe"][0]
@@ -661,38 +853,50 @@ def write_case(folder: Path, p: ModelParams, ool, campaign: dict, seed: int) -> 
         np.savetxt(fh, np.column_stack([t, fo, fe]), delimiter=",", fmt="%.12g")
     # FRFs
     for name, (f, h) in d["frf"].items():
-        g = (rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)) \
-            / math.sqrt(2.0)
+        g = (
+            rng.standard_normal(f.size) + 1j * rng.standard_normal(f.size)
+        ) / math.sqrt(2.0)
         write_frf_csv(folder / f"{name}.csv", f, h * (1.0 + FRF_NOISE * g))
     # surface and ring profiles
     fld = surface_field(campaign)
     noise = ToolNoise(case, p, rng, _field_windows(case, fld), ool=ool)
     z = sweep_surface(case, p, d["traj"], fld, noise)
     z = z + INSTRUMENT_NOISE * rng.standard_normal(z.shape)
-    np.savez(folder / "surface.npz", z=z, dx=fld.pitch_x, dy=fld.pitch_y,
-             x0=fld.x0, y0=fld.y0)
+    np.savez(
+        folder / "surface.npz",
+        z=z,
+        dx=fld.pitch_x,
+        dy=fld.pitch_y,
+        x0=fld.x0,
+        y0=fld.y0,
+    )
     rec_lines = []
     t_rev = 2 * math.pi / case.toolpath.path.angular_speed
     for k in range(campaign["rings"]):
         x, y, r = ring_points(case, k, campaign["profile_dx"])
-        tn = ToolNoise(case, p, rng, [(k * t_rev - 0.01, (k + 1) * t_rev + 0.01)],
-                       ool=ool)
+        tn = ToolNoise(
+            case, p, rng, [(k * t_rev - 0.01, (k + 1) * t_rev + 0.01)], ool=ool
+        )
         zp = profile_heights(case, p, d["traj"], x, y, tn)
         zp = zp + INSTRUMENT_NOISE * rng.standard_normal(zp.shape)
         np.savez(folder / f"ring{k}.npz", z=zp, dx=campaign["profile_dx"])
-        rec_lines.append(f'[[recording]]\npath = "ring{k}.npz"\nkind = "profile"\n'
-                         f"radius = {r!r}\n")
+        rec_lines.append(
+            f'[[recording]]\npath = "ring{k}.npz"\nkind = "profile"\nradius = {r!r}\n'
+        )
     tp = os.path.relpath(TOOLPATH, folder)
-    text = (f'[case]\nmachine = "seed-prototype"\ntoolpath = "{tp}"\n'
-            f"bandwidth = {BANDWIDTH}\nmoving-mass = {MASS}\n\n"
-            '[[recording]]\npath = "idle.npz"\nkind = "following-error"\n\n'
-            '[[recording]]\npath = "aircut.npz"\nkind = "following-error"\n\n'
-            '[[recording]]\npath = "cut.csv"\nkind = "cut"\n\n'
-            '[[recording]]\npath = "frf_ol.csv"\nkind = "frf-open-loop"\n\n'
-            '[[recording]]\npath = "frf_cl.csv"\nkind = "frf-closed-loop"\n\n'
-            '[[recording]]\npath = "frf_force.csv"\nkind = "frf-force"\n\n'
-            '[[recording]]\npath = "surface.npz"\nkind = "surface"\n\n'
-            + "\n".join(rec_lines))
+    text = (
+        f'[case]\nmachine = "seed-prototype"\ntoolpath = "{tp}"\n'
+        f"bandwidth = {BANDWIDTH}\nmoving-mass = {MASS}\n\n"
+        '[[recording]]\npath = "idle.npz"\nkind = "following-error"\n\n'
+        '[[recording]]\npath = "aircut.npz"\nkind = "following-error"\n\n'
+        + extra
+        + '[[recording]]\npath = "cut.csv"\nkind = "cut"\n\n'
+        '[[recording]]\npath = "frf_ol.csv"\nkind = "frf-open-loop"\n\n'
+        '[[recording]]\npath = "frf_cl.csv"\nkind = "frf-closed-loop"\n\n'
+        '[[recording]]\npath = "frf_force.csv"\nkind = "frf-force"\n\n'
+        '[[recording]]\npath = "surface.npz"\nkind = "surface"\n\n'
+        + "\n".join(rec_lines)
+    )
     (folder / "manifest.toml").write_text(text)
 
 
@@ -710,6 +914,7 @@ def build(spec: dict, campaign: dict):
 
         def make1(s, kn=kn):
             return ModelParams(**kn(s)), None
+
         s = scale_to_enr(spec["enr"], make1, campaign, s0)
         knobs.append(kn(s))
         truths[name] = {k: float(v) for k, v in tr(s).items()}
@@ -718,6 +923,7 @@ def build(spec: dict, campaign: dict):
 
         def make2(s):
             return ModelParams(**okn(s)), om(s)
+
         s = scale_to_enr(spec["enr"], make2, campaign, s0)
         knobs.append(okn(s))
         ool_make = om(s)

@@ -45,22 +45,30 @@ ENRS = (0.03, 0.1, 0.3)
 
 def suite(quick: bool, seed: int) -> list[dict]:
     """Case specifications in a seeded random order."""
-    import numpy as np
-
     import cases as C
+    import numpy as np
 
     specs = []
     if quick:
         for e in C.EFFECTS:
             specs.append({"effects": [e], "ool": None, "enr": 0.3})
         specs += [{"effects": [], "ool": None, "enr": 0.0} for _ in range(3)]
-        specs += [{"effects": [], "ool": k, "enr": 1.0}
-                  for k in ("bouc-wen-hysteresis", "opposite-sign-mode",
-                            "sensor-1/f-noise")]
-        specs += [{"effects": ["structural-mode", "tool-radius-error"], "ool": None,
-                   "enr": 0.3},
-                  {"effects": ["loop-delay", "base-vibration-lines"], "ool": None,
-                   "enr": 0.3}]
+        specs += [
+            {"effects": [], "ool": k, "enr": 1.0}
+            for k in ("bouc-wen-hysteresis", "opposite-sign-mode", "sensor-1/f-noise")
+        ]
+        specs += [
+            {
+                "effects": ["structural-mode", "tool-radius-error"],
+                "ool": None,
+                "enr": 0.3,
+            },
+            {
+                "effects": ["loop-delay", "base-vibration-lines"],
+                "ool": None,
+                "enr": 0.3,
+            },
+        ]
     else:
         for e in C.EFFECTS:
             for enr in ENRS:
@@ -72,8 +80,13 @@ def suite(quick: bool, seed: int) -> list[dict]:
         rng = np.random.default_rng(seed + 1)
         for i in range(10):
             a, b = rng.choice(len(C.EFFECTS), 2, replace=False)
-            specs.append({"effects": [C.EFFECTS[a], C.EFFECTS[b]], "ool": None,
-                          "enr": 0.1 if i % 2 else 0.3})
+            specs.append(
+                {
+                    "effects": [C.EFFECTS[a], C.EFFECTS[b]],
+                    "ool": None,
+                    "enr": 0.1 if i % 2 else 0.3,
+                }
+            )
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(specs))
     out = []
@@ -99,8 +112,7 @@ def seal(key: dict, out: Path) -> None:
     plain = json.dumps(key, sort_keys=True).encode()
     secret = secrets.token_bytes(32)
     comp = zlib.compress(plain, 9)
-    enc = bytes(a ^ b for a, b in zip(comp, _keystream(secret, len(comp)),
-                                      strict=True))
+    enc = bytes(a ^ b for a, b in zip(comp, _keystream(secret, len(comp)), strict=True))
     (out / "key.sealed").write_bytes(base64.b64encode(enc))
     (out / "key.secret").write_text(secret.hex())
     (out / "key.sha256").write_text(hashlib.sha256(plain).hexdigest())
@@ -126,13 +138,20 @@ def make_one(args) -> dict:
     campaign = C.CAMPAIGNS[campaign_name]
     p, ool, truth = C.build(spec, campaign)
     C.write_case(Path(root) / "cases" / spec["case"], p, ool, campaign, spec["seed"])
-    return {"case": spec["case"], "effects": spec["effects"], "ool": spec["ool"],
-            "enr": spec["enr"], "seed": spec["seed"], "truth": truth,
-            "campaign": campaign_name}
+    return {
+        "case": spec["case"],
+        "effects": spec["effects"],
+        "ool": spec["ool"],
+        "enr": spec["enr"],
+        "seed": spec["seed"],
+        "truth": truth,
+        "campaign": campaign_name,
+    }
 
 
-def generate(out: Path, *, quick: bool, seed: int = 1, jobs: int = 2,
-             limit: int | None = None) -> list[dict]:
+def generate(
+    out: Path, *, quick: bool, seed: int = 1, jobs: int = 2, limit: int | None = None
+) -> list[dict]:
     """Generate the suite into ``out`` and seal the key."""
     import multiprocessing as mp
 
@@ -150,6 +169,42 @@ def generate(out: Path, *, quick: bool, seed: int = 1, jobs: int = 2,
     else:
         key = [make_one(w) for w in work]
     seal({"cases": key, "seed": seed, "quick": quick}, out)
+    return key
+
+
+def generate_specs(
+    out: Path,
+    specs: list[dict],
+    *,
+    campaign: str = "test",
+    seed: int = 1,
+    jobs: int = 1,
+) -> list[dict]:
+    """Generate given case specs (``effects``, ``ool``, ``enr``) and seal the key.
+
+    Used by the tests for a small blind subset on a short campaign.
+    """
+    import multiprocessing as mp
+
+    out = Path(out)
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    full = []
+    for n, sp in enumerate(specs):
+        s = {
+            "effects": list(sp.get("effects", [])),
+            "ool": sp.get("ool"),
+            "enr": float(sp.get("enr", 0.0)),
+            "seed": int(seed * 1009 + 17 * n),
+            "case": f"case_{n:04d}",
+        }
+        full.append(s)
+    work = [(s, campaign, str(out)) for s in full]
+    if jobs > 1:
+        with mp.get_context("spawn").Pool(jobs) as pool:
+            key = list(pool.imap(make_one, work))
+    else:
+        key = [make_one(w) for w in work]
+    seal({"cases": key, "seed": seed, "quick": True}, out)
     return key
 
 

@@ -60,17 +60,23 @@ def diagnose_all(out: Path, jobs: int = 2, progress=True) -> None:
 
     folders = sorted((out / "cases").glob("case_*"))
     (out / "results").mkdir(exist_ok=True)
-    work = [(str(f), str(out)) for f in folders
-            if not (out / "results" / f"{f.name}.json").exists()]
+    work = [
+        (str(f), str(out))
+        for f in folders
+        if not (out / "results" / f"{f.name}.json").exists()
+    ]
     t0 = time.perf_counter()
     if jobs > 1:
         ctx = mp.get_context("spawn")
         with ctx.Pool(jobs, maxtasksperchild=20) as pool:
             for i, name in enumerate(pool.imap_unordered(_diagnose_one, work)):
                 if progress:
-                    print(f"[{i + 1}/{len(work)}] {name} "
-                          f"({time.perf_counter() - t0:.0f} s)", file=sys.stderr,
-                          flush=True)
+                    print(
+                        f"[{i + 1}/{len(work)}] {name} "
+                        f"({time.perf_counter() - t0:.0f} s)",
+                        file=sys.stderr,
+                        flush=True,
+                    )
     else:
         for i, w in enumerate(work):
             _diagnose_one(w)
@@ -82,8 +88,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="22 cases, short campaign")
     ap.add_argument("--json", action="store_true", help="print the JSON summary")
-    ap.add_argument("--out", default=None, help="work folder (default results/"
-                    "discovery[-quick])")
+    ap.add_argument(
+        "--out", default=None, help="work folder (default results/discovery[-quick])"
+    )
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
     ap.add_argument("--seed", type=int, default=1, help="suite seed")
     ap.add_argument("--keep", action="store_true", help="keep the recordings")

@@ -14,7 +14,8 @@ plus the runtime) and only then opens ``OUT/key.sealed``. Metrics:
 * out-of-catalogue: share called ``unexplained`` or ``partly-explained`` (and the
   share confidently, wrongly ``explained``);
 * two-effect cases: both hidden effects among the explanations;
-* parameter error: relative error of the effect's primary parameters (relative to
+* parameter error: relative error of the effect's primary parameters (mode:
+  frequency and resonant compliance g / 2 zeta; relative to
   the change from nominal for k_t and the sensor-noise shape; of the added curve
   over the stroke for two-coefficient modules; of the drift curve for thermal
   drift; of the coefficient vector for the edge waviness);
@@ -34,9 +35,14 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-TARGETS = {"top1_enr_ge_0.1": 0.95, "top1_enr_0.03": 0.60, "false_alarm_rate": 0.02,
-           "ool_flagged": 0.80, "median_param_error_enr_ge_0.1": 0.10,
-           "pair_both_found_enr_ge_0.1": 0.80}
+TARGETS = {
+    "top1_enr_ge_0.1": 0.95,
+    "top1_enr_0.03": 0.60,
+    "false_alarm_rate": 0.02,
+    "ool_flagged": 0.80,
+    "median_param_error_enr_ge_0.1": 0.10,
+    "pair_both_found_enr_ge_0.1": 0.80,
+}
 
 
 def _rel(a, b):
@@ -65,8 +71,11 @@ def _curve_err(est, tru, names, powers, lo, hi):
 def param_error(effect: str, truth: dict, est: dict, nominal: dict) -> float:
     """Relative error of the primary parameters of one effect (see module doc)."""
     if effect == "structural-mode":
-        return max(_rel(est["frequency"], truth["frequency"]),
-                   _rel(est["compliance"], truth["compliance"]))
+        # frequency and resonant compliance g / (2 zeta): the peak the data see
+        # (static compliance and damping trade off when the peak is narrow)
+        peak_e = est["compliance"] / (2 * est["damping_ratio"])
+        peak_t = truth["compliance"] / (2 * truth["damping_ratio"])
+        return max(_rel(est["frequency"], truth["frequency"]), _rel(peak_e, peak_t))
     if effect == "loop-delay":
         return _rel(est["extra_delay"], truth["extra_delay"])
     if effect == "base-vibration-lines":
@@ -89,6 +98,7 @@ def param_error(effect: str, truth: dict, est: dict, nominal: dict) -> float:
             a = p.get("drift_amplitude", p.get("amplitude", 0.0))
             b = p.get("drift_rate", p.get("rate", 0.0))
             return a * (1 - np.exp(-t / tau)) + b * t
+
         dt = d(truth)
         return float(np.linalg.norm(d(est) - dt) / max(np.linalg.norm(dt), 1e-300))
     if effect == "flexure-stiffness-nonlinearity":
@@ -111,7 +121,8 @@ def param_error(effect: str, truth: dict, est: dict, nominal: dict) -> float:
     if effect == "cutting-force-coefficient":
         k0 = nominal["specific_force"]
         return abs(est["specific_force"] - truth["specific_force"]) / abs(
-            truth["specific_force"] - k0)
+            truth["specific_force"] - k0
+        )
     if effect == "spindle-axial-error":
         h = truth["order_1"]
         for k in range(1, 5):
@@ -128,9 +139,12 @@ def _nominal() -> dict:
 
     case = C.base_case()
     sn = case.machine.disturbances.sensor_noise
-    return {"sensor_floor": sn.floor, "sensor_corner": sn.corner,
-            "specific_force": case.specific_force,
-            "drift_span": 3 * 2 * math.pi / case.toolpath.path.angular_speed}
+    return {
+        "sensor_floor": sn.floor,
+        "sensor_corner": sn.corner,
+        "specific_force": case.specific_force,
+        "drift_span": 3 * 2 * math.pi / case.toolpath.path.angular_speed,
+    }
 
 
 def score(out: Path) -> dict:
@@ -146,18 +160,27 @@ def score(out: Path) -> dict:
     rows = []
     for k in key["cases"]:
         r = res.get(k["case"])
-        row = {"case": k["case"], "effects": k["effects"], "ool": k["ool"],
-               "enr": k["enr"], "missing": r is None}
+        row = {
+            "case": k["case"],
+            "effects": k["effects"],
+            "ool": k["ool"],
+            "enr": k["enr"],
+            "missing": r is None,
+        }
         if r is None or "error" in r:
             row["verdict"] = "error"
             row["error"] = None if r is None else r["error"]
             rows.append(row)
             continue
         ex = sorted(r["explanations"], key=lambda e: -e["delta_bic"])
-        row.update(verdict=r["verdict"], found=[e["effect"] for e in ex],
-                   runtime=r.get("runtime_s"), fit_before=r.get("fit_before_percent"),
-                   fit_after=r.get("fit_after_percent"),
-                   unexplained=r.get("unexplained_power_fraction"))
+        row.update(
+            verdict=r["verdict"],
+            found=[e["effect"] for e in ex],
+            runtime=r.get("runtime_s"),
+            fit_before=r.get("fit_before_percent"),
+            fit_after=r.get("fit_after_percent"),
+            unexplained=r.get("unexplained_power_fraction"),
+        )
         if len(k["effects"]) == 1 and ex and ex[0]["effect"] == k["effects"][0]:
             e = k["effects"][0]
             row["param_error"] = param_error(e, k["truth"][e], ex[0]["parameters"], nom)
@@ -178,41 +201,59 @@ def summarise(rows: list[dict]) -> dict:
     pair = [r for r in rows if len(r["effects"]) == 2]
 
     def top1(r):
-        return bool(r.get("found")) and r["found"][0] == r["effects"][0] \
+        return (
+            bool(r.get("found"))
+            and r["found"][0] == r["effects"][0]
             and r["verdict"] in ("explained", "partly-explained")
+        )
 
-    out = {"cases": len(rows), "errors": sum(1 for r in rows if r["verdict"] == "error")}
+    out = {
+        "cases": len(rows),
+        "errors": sum(1 for r in rows if r["verdict"] == "error"),
+    }
     by_enr = {}
     for enr in sorted({r["enr"] for r in single}):
         rs = [r for r in single if r["enr"] == enr]
         pe = [r["param_error"] for r in rs if "param_error" in r]
-        by_enr[str(enr)] = {"n": len(rs),
-                            "detection": _rate(rs, lambda r: r["verdict"] not in
-                                               ("consistent", "error")),
-                            "top1": _rate(rs, top1),
-                            "median_param_error": float(np.median(pe)) if pe else None}
+        by_enr[str(enr)] = {
+            "n": len(rs),
+            "detection": _rate(
+                rs, lambda r: r["verdict"] not in ("consistent", "error")
+            ),
+            "top1": _rate(rs, top1),
+            "median_param_error": float(np.median(pe)) if pe else None,
+        }
     out["single_by_enr"] = by_enr
     hi = [r for r in single if r["enr"] >= 0.1]
     pe_hi = [r["param_error"] for r in hi if "param_error" in r]
     out["top1_enr_ge_0.1"] = _rate(hi, top1)
     out["top1_enr_0.03"] = _rate([r for r in single if r["enr"] == 0.03], top1)
-    out["detection_enr_ge_0.1"] = _rate(hi, lambda r: r["verdict"] not in
-                                        ("consistent", "error"))
+    out["detection_enr_ge_0.1"] = _rate(
+        hi, lambda r: r["verdict"] not in ("consistent", "error")
+    )
     out["median_param_error_enr_ge_0.1"] = float(np.median(pe_hi)) if pe_hi else None
     out["false_alarm_rate"] = _rate(null, lambda r: r["verdict"] != "consistent")
     out["null_cases"] = len(null)
-    out["ool_flagged"] = _rate(ool, lambda r: r["verdict"] in
-                               ("unexplained", "partly-explained"))
+    out["ool_flagged"] = _rate(
+        ool, lambda r: r["verdict"] in ("unexplained", "partly-explained")
+    )
     out["ool_confidently_wrong"] = _rate(ool, lambda r: r["verdict"] == "explained")
     out["ool_cases"] = len(ool)
     ph = [r for r in pair if r["enr"] >= 0.1]
     out["pair_both_found_enr_ge_0.1"] = _rate(
-        ph, lambda r: set(r["effects"]) <= set(r.get("found", [])))
+        ph, lambda r: set(r["effects"]) <= set(r.get("found", []))
+    )
     out["pair_cases"] = len(pair)
-    fb = [r["fit_before"] for r in rows if r.get("fit_before") is not None
-          and np.isfinite(r["fit_before"])]
-    fa = [r["fit_after"] for r in rows if r.get("fit_after") is not None
-          and np.isfinite(r["fit_after"])]
+    fb = [
+        r["fit_before"]
+        for r in rows
+        if r.get("fit_before") is not None and np.isfinite(r["fit_before"])
+    ]
+    fa = [
+        r["fit_after"]
+        for r in rows
+        if r.get("fit_after") is not None and np.isfinite(r["fit_after"])
+    ]
     out["fit_before_percent"] = float(np.mean(fb)) if fb else None
     out["fit_after_percent"] = float(np.mean(fa)) if fa else None
     rt = [r["runtime"] for r in rows if r.get("runtime")]
@@ -220,77 +261,135 @@ def summarise(rows: list[dict]) -> dict:
     per = {}
     for e in sorted({r["effects"][0] for r in single}):
         rs = [r for r in single if r["effects"][0] == e]
-        per[e] = {str(enr): {"top1": _rate([r for r in rs if r["enr"] == enr], top1),
-                             "n": len([r for r in rs if r["enr"] == enr])}
-                  for enr in sorted({r["enr"] for r in rs})}
+        per[e] = {
+            str(enr): {
+                "top1": _rate([r for r in rs if r["enr"] == enr], top1),
+                "n": len([r for r in rs if r["enr"] == enr]),
+            }
+            for enr in sorted({r["enr"] for r in rs})
+        }
         pe = [r["param_error"] for r in rs if "param_error" in r and r["enr"] >= 0.1]
         per[e]["median_param_error_enr_ge_0.1"] = float(np.median(pe)) if pe else None
     out["per_effect"] = per
-    out["ool_detail"] = [{"ool": r["ool"], "enr": r["enr"], "verdict": r["verdict"],
-                          "found": r.get("found", [])} for r in ool]
-    out["pair_detail"] = [{"effects": r["effects"], "enr": r["enr"],
-                           "verdict": r["verdict"], "found": r.get("found", [])}
-                          for r in pair]
-    out["null_detail"] = [{"verdict": r["verdict"], "found": r.get("found", [])}
-                          for r in null if r["verdict"] != "consistent"]
-    out["wrong_single"] = [{"effect": r["effects"][0], "enr": r["enr"],
-                            "verdict": r["verdict"], "found": r.get("found", [])}
-                           for r in single if not top1(r)]
-    out["targets"] = {k: {"target": v, "value": out.get(k),
-                          "met": (out.get(k) is not None and not (
-                              isinstance(out.get(k), float) and math.isnan(out[k]))
-                              and ((out[k] <= v) if k in ("false_alarm_rate",
-                                                          "median_param_error_enr_ge_0.1")
-                                   else (out[k] >= v)))}
-                      for k, v in TARGETS.items()}
+    out["ool_detail"] = [
+        {
+            "ool": r["ool"],
+            "enr": r["enr"],
+            "verdict": r["verdict"],
+            "found": r.get("found", []),
+        }
+        for r in ool
+    ]
+    out["pair_detail"] = [
+        {
+            "effects": r["effects"],
+            "enr": r["enr"],
+            "verdict": r["verdict"],
+            "found": r.get("found", []),
+        }
+        for r in pair
+    ]
+    out["null_detail"] = [
+        {"verdict": r["verdict"], "found": r.get("found", [])}
+        for r in null
+        if r["verdict"] != "consistent"
+    ]
+    out["wrong_single"] = [
+        {
+            "effect": r["effects"][0],
+            "enr": r["enr"],
+            "verdict": r["verdict"],
+            "found": r.get("found", []),
+        }
+        for r in single
+        if not top1(r)
+    ]
+    out["targets"] = {
+        k: {
+            "target": v,
+            "value": out.get(k),
+            "met": (
+                out.get(k) is not None
+                and not (isinstance(out.get(k), float) and math.isnan(out[k]))
+                and (
+                    (out[k] <= v)
+                    if k in ("false_alarm_rate", "median_param_error_enr_ge_0.1")
+                    else (out[k] >= v)
+                )
+            ),
+        }
+        for k, v in TARGETS.items()
+    }
     return out
 
 
 def table(s: dict) -> str:
     """Markdown table of a summary."""
+
     def f(v, pct=True):
         if v is None or (isinstance(v, float) and math.isnan(v)):
             return "n/a"
         return f"{100 * v:.0f} %" if pct else f"{v:.3g}"
+
     lines = ["| metric | value | target |", "|---|---|---|"]
     tg = s["targets"]
     for k, label, pct in (
-            ("detection_enr_ge_0.1", "detection, ENR >= 0.1", True),
-            ("top1_enr_ge_0.1", "top-1 attribution, ENR >= 0.1", True),
-            ("top1_enr_0.03", "top-1 attribution, ENR 0.03", True),
-            ("false_alarm_rate", "false alarms on null cases", True),
-            ("ool_flagged", "out-of-catalogue called unexplained/partly", True),
-            ("ool_confidently_wrong", "out-of-catalogue called explained", True),
-            ("median_param_error_enr_ge_0.1", "median parameter error, ENR >= 0.1",
-             True),
-            ("pair_both_found_enr_ge_0.1", "two-effect: both found, ENR >= 0.1", True),
-            ("fit_before_percent", "fit before (%)", False),
-            ("fit_after_percent", "fit after (%)", False),
-            ("median_runtime_s", "median runtime per case (s)", False)):
+        ("detection_enr_ge_0.1", "detection, ENR >= 0.1", True),
+        ("top1_enr_ge_0.1", "top-1 attribution, ENR >= 0.1", True),
+        ("top1_enr_0.03", "top-1 attribution, ENR 0.03", True),
+        ("false_alarm_rate", "false alarms on null cases", True),
+        ("ool_flagged", "out-of-catalogue called unexplained/partly", True),
+        ("ool_confidently_wrong", "out-of-catalogue called explained", True),
+        ("median_param_error_enr_ge_0.1", "median parameter error, ENR >= 0.1", True),
+        ("pair_both_found_enr_ge_0.1", "two-effect: both found, ENR >= 0.1", True),
+        ("fit_before_percent", "fit before (%)", False),
+        ("fit_after_percent", "fit after (%)", False),
+        ("median_runtime_s", "median runtime per case (s)", False),
+    ):
         t = tg.get(k)
-        tt = "" if t is None else (("<= " if k in ("false_alarm_rate",
-                                                   "median_param_error_enr_ge_0.1")
-                                    else ">= ") + f(t["target"]) + (
-            " (met)" if t["met"] else " (NOT met)"))
+        tt = (
+            ""
+            if t is None
+            else (
+                (
+                    "<= "
+                    if k in ("false_alarm_rate", "median_param_error_enr_ge_0.1")
+                    else ">= "
+                )
+                + f(t["target"])
+                + (" (met)" if t["met"] else " (NOT met)")
+            )
+        )
         lines.append(f"| {label} | {f(s.get(k), pct)} | {tt} |")
     lines.append("")
-    lines.append(f"cases {s['cases']} (null {s['null_cases']}, out-of-catalogue "
-                 f"{s['ool_cases']}, two-effect {s['pair_cases']}, errors {s['errors']})")
+    lines.append(
+        f"cases {s['cases']} (null {s['null_cases']}, out-of-catalogue "
+        f"{s['ool_cases']}, two-effect {s['pair_cases']}, errors {s['errors']})"
+    )
     lines.append("")
     lines.append("| ENR | n | detection | top-1 | median parameter error |")
     lines.append("|---|---|---|---|---|")
     for enr, v in s["single_by_enr"].items():
-        lines.append(f"| {enr} | {v['n']} | {f(v['detection'])} | {f(v['top1'])} | "
-                     f"{f(v['median_param_error'])} |")
+        lines.append(
+            f"| {enr} | {v['n']} | {f(v['detection'])} | {f(v['top1'])} | "
+            f"{f(v['median_param_error'])} |"
+        )
     lines.append("")
     enrs = sorted({k for v in s["per_effect"].values() for k in v if k[0].isdigit()})
-    lines.append("| effect | " + " | ".join(f"top-1 @ {e}" for e in enrs)
-                 + " | median param. error (ENR >= 0.1) |")
+    lines.append(
+        "| effect | "
+        + " | ".join(f"top-1 @ {e}" for e in enrs)
+        + " | median param. error (ENR >= 0.1) |"
+    )
     lines.append("|---|" + "---|" * (len(enrs) + 1))
     for e, v in s["per_effect"].items():
-        lines.append(f"| {e} | " + " | ".join(
-            f(v[x]["top1"]) + f" ({v[x]['n']})" if x in v else "" for x in enrs)
-            + f" | {f(v['median_param_error_enr_ge_0.1'])} |")
+        lines.append(
+            f"| {e} | "
+            + " | ".join(
+                f(v[x]["top1"]) + f" ({v[x]['n']})" if x in v else "" for x in enrs
+            )
+            + f" | {f(v['median_param_error_enr_ge_0.1'])} |"
+        )
     return "\n".join(lines)
 
 

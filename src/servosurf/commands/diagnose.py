@@ -7,21 +7,34 @@ import argparse
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "diagnose", help="find what the model leaves out: locate, explain, refit",
+        "diagnose",
+        help="find what the model leaves out: locate, explain, refit",
         description="Compare the recordings a manifest lists (following error, FRFs, "
         "cuts, surface maps, profiles) with the simulator; locate where they differ "
         "and how surely; rank a catalogue of left-out physics by how well each "
         "signature matches; fit and select with a BIC-like criterion; say "
         "'unexplained' when nothing in the catalogue accounts for the mismatch. "
         "Writes fitted-machine.toml, fitted-effects.toml, before/after PNGs and "
-        "summary.json.")
-    p.add_argument("manifest", nargs="?", metavar="MANIFEST.toml",
-                   help="the case and its recordings (see servosurf.diagnose)")
-    p.add_argument("--list", action="store_true",
-                   help="print the catalogue of effects with their parameters and "
-                   "units, then exit")
-    p.add_argument("--out", metavar="DIR", default="results/diagnose",
-                   help="output directory (default results/diagnose)")
+        "summary.json.",
+    )
+    p.add_argument(
+        "manifest",
+        nargs="?",
+        metavar="MANIFEST.toml",
+        help="the case and its recordings (see servosurf.diagnose)",
+    )
+    p.add_argument(
+        "--list",
+        action="store_true",
+        help="print the catalogue of effects with their parameters and "
+        "units, then exit",
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        default="results/diagnose",
+        help="output directory (default results/diagnose)",
+    )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     return p
 
@@ -53,12 +66,12 @@ def run(args) -> int:
         return 0
     if not args.manifest:
         raise ConfigError("give a MANIFEST.toml (or --list for the catalogue)")
+    import sys
+
     from .._progress import is_quiet, stage
     from ..diagnose import diagnose
     from ..diagnose._report import figures, fitted_effects_toml, fitted_machine_toml
     from ._common import atomic_write, out_dir, print_json, write_json
-
-    import sys
 
     def progress(msg: str) -> None:
         if not is_quiet():
@@ -74,9 +87,11 @@ def run(args) -> int:
         atomic_write(out / "fitted-effects.toml", lambda p: p.write_text(eff))
         figs = figures(d, out)
     summary = d.to_dict()
-    summary["files"] = {"fitted_machine": str(out / "fitted-machine.toml"),
-                        "fitted_effects": str(out / "fitted-effects.toml"),
-                        "figures": {k: str(v) for k, v in figs.items()}}
+    summary["files"] = {
+        "fitted_machine": str(out / "fitted-machine.toml"),
+        "fitted_effects": str(out / "fitted-effects.toml"),
+        "figures": {k: str(v) for k, v in figs.items()},
+    }
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
@@ -87,6 +102,8 @@ def run(args) -> int:
             print(f"  {e['effect']} (delta BIC {e['delta_bic']:.1f}): {pars}")
         for m in (d.remainder if d.verdict != "consistent" else [])[:5]:
             print(f"  left: {m.recording}: {m.where} (-log10 p {m.significance:.1f})")
-        print(f"fit {d.fit_before_percent:.2f} % -> {d.fit_after_percent:.2f} %; "
-              f"written to {out}")
+        print(
+            f"fit {d.fit_before_percent:.2f} % -> {d.fit_after_percent:.2f} %; "
+            f"written to {out}"
+        )
     return 0

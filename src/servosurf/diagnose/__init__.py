@@ -15,9 +15,21 @@ from ._manifest import KINDS, Manifest, Recording, load_manifest, read_recording
 from ._sim import CaseModel, ModelParams
 
 __all__ = [
-    "CATALOGUE", "Effect", "catalogue_table", "get_effect",
-    "VERDICTS", "Diagnosis", "build_case", "diagnose",
-    "Mismatch", "locate",
-    "KINDS", "Manifest", "Recording", "load_manifest", "read_recording",
-    "CaseModel", "ModelParams",
+    "CATALOGUE",
+    "Effect",
+    "catalogue_table",
+    "get_effect",
+    "VERDICTS",
+    "Diagnosis",
+    "build_case",
+    "diagnose",
+    "Mismatch",
+    "locate",
+    "KINDS",
+    "Manifest",
+    "Recording",
+    "load_manifest",
+    "read_recording",
+    "CaseModel",
+    "ModelParams",
 ]

@@ -24,14 +24,24 @@ term so that accepted lines, modes and noise shapes enter the weighting):
 from __future__ import annotations
 
 import math
+
 import numpy as np
 import scipy as sp
 import scipy.sparse  # noqa: F401  (sp.sparse)
 
 from ._sim import CaseModel, ModelParams
 
-__all__ = ["Block", "SpectralBlock", "TimeBlock", "CutBlock", "ForceBlock",
-           "FRFBlock", "PointsBlock", "Context", "line_power"]
+__all__ = [
+    "Block",
+    "SpectralBlock",
+    "TimeBlock",
+    "CutBlock",
+    "ForceBlock",
+    "FRFBlock",
+    "PointsBlock",
+    "Context",
+    "line_power",
+]
 
 #: Residual returned when the simulated loop diverges (huge but finite).
 _DIVERGED = 1e6
@@ -62,8 +72,14 @@ def dirichlet2(delta: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def line_power(case: CaseModel, p: ModelParams, freq: np.ndarray, n: int,
-               output: str = "fe", paths_fn=None) -> np.ndarray:
+def line_power(
+    case: CaseModel,
+    p: ModelParams,
+    freq: np.ndarray,
+    n: int,
+    output: str = "fe",
+    paths_fn=None,
+) -> np.ndarray:
     """Expected periodogram (one-sided, m^2/Hz) of ``p``'s base lines at the bins.
 
     A line of base amplitude ``a`` at ``f0`` appears in ``output`` with amplitude
@@ -129,8 +145,13 @@ class Context:
 
         kp = p.key(SIM_TAGS)
         for key, v in list(self._memo.items()):
-            if (len(key) == 4 and key[0] == kp and key[1] == "cut" and key[3] == k0
-                    and key[2] >= n):
+            if (
+                len(key) == 4
+                and key[0] == kp
+                and key[1] == "cut"
+                and key[3] == k0
+                and key[2] >= n
+            ):
                 return {k: a[:n] for k, a in v.items()}
         return self.memo((kp, "cut", n, k0), run)
 
@@ -140,10 +161,22 @@ class Context:
 
         spec = self.case.toolpath
         period = 1.0 / spec.path.frequency if spec.kind == "lenslet" else 0.01
-        n = int(round(min(12 * period if spec.kind == "lenslet" else 0.12,
-                          spec.path.duration) * self.case.fs)) + 2
-        return self.memo((p.key(SIM_TAGS), "traj"), lambda: tool_trajectory(
-            self.case, p, sim=self.cut_sim(p, n)))
+        n = (
+            int(
+                round(
+                    min(
+                        12 * period if spec.kind == "lenslet" else 0.12,
+                        spec.path.duration,
+                    )
+                    * self.case.fs
+                )
+            )
+            + 2
+        )
+        return self.memo(
+            (p.key(SIM_TAGS), "traj"),
+            lambda: tool_trajectory(self.case, p, sim=self.cut_sim(p, n)),
+        )
 
 
 class Block:
@@ -213,17 +246,23 @@ class SpectralBlock(Block):
         x = np.fft.rfft(fe - fe.mean(axis=1, keepdims=True), axis=1)[:, keep]
         self.pbar = np.mean(np.abs(x) ** 2, axis=0) * 2.0 / (fs * n)
         self.spec_records = np.abs(x) ** 2 * 2.0 / (fs * n)
-        super().__init__(recording=name, kind="following-error", domain="spectrum",
-                         n=int(self.freq.size))
+        super().__init__(
+            recording=name,
+            kind="following-error",
+            domain="spectrum",
+            n=int(self.freq.size),
+        )
 
     tags = ("linear", "lines", "sensor_noise")
 
     def expected(self, p: ModelParams) -> np.ndarray:
         """Expected periodogram (m^2/Hz) at the block's bins under ``p``."""
+
         def run():
             ps = self.ctx.case.paths(p, self.freq)
             s = self.ctx.case.noise_psd(p, self.freq, "fe", paths=ps)
             return s + line_power(self.ctx.case, p, self.freq, self.nsamp)
+
         return self.ctx.memo((p.key(self.tags), "spec", self.recording), run)
 
     def residual(self, p: ModelParams) -> np.ndarray:
@@ -240,8 +279,12 @@ def _whiten_weights(ctx: Context, p: ModelParams, freq: np.ndarray, n: int):
     return 1.0 / np.sqrt(np.maximum(s, 1e-300) * n * ctx.case.fs / 4.0)
 
 
-def _remove_lines(w: np.ndarray, cols: list[tuple[np.ndarray, np.ndarray]],
-                  amps: np.ndarray, sweeps: int = 3) -> np.ndarray:
+def _remove_lines(
+    w: np.ndarray,
+    cols: list[tuple[np.ndarray, np.ndarray]],
+    amps: np.ndarray,
+    sweeps: int = 3,
+) -> np.ndarray:
     """Subtract sinusoids of known amplitude and free phase from ``w``.
 
     ``cols[j] = (c1, c2)`` are the whitened unit cosine and sine of line j, its
@@ -259,24 +302,18 @@ def _remove_lines(w: np.ndarray, cols: list[tuple[np.ndarray, np.ndarray]],
             r = r + models[j]
             a1, a2 = float(r @ c1), float(r @ c2)
             g11, g22, g12 = float(c1 @ c1), float(c2 @ c2), float(c1 @ c2)
-            f = -2 * a * (cp * a1 - sp_ * a2) + a * a * (cp * cp * g11 - 2 * sp_ * cp
-                                                          * g12 + sp_ * sp_ * g22)
+            f = -2 * a * (cp * a1 - sp_ * a2) + a * a * (
+                cp * cp * g11 - 2 * sp_ * cp * g12 + sp_ * sp_ * g22
+            )
             k = int(np.argmin(f))
             fm, f0, fp = f[k - 1], f[k], f[(k + 1) % f.size]
             den = fm - 2 * f0 + fp
             phi = phis[k] + (0.5 * (fm - fp) / den if den > 0 else 0.0) * (
-                phis[1] - phis[0])
+                phis[1] - phis[0]
+            )
             models[j] = a * (np.cos(phi) * c1 - np.sin(phi) * c2)
             r = r - models[j]
     return r
-
-
-def _project_out(w: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """``w`` minus its least-squares projection on the columns ``cols``."""
-    if cols.shape[1] == 0:
-        return w
-    q, _ = np.linalg.qr(cols)
-    return w - q @ (q.T @ w)
 
 
 class TimeBlock(Block):
@@ -289,8 +326,14 @@ class TimeBlock(Block):
     pins their frequency.
     """
 
-    def __init__(self, ctx: Context, name: str, records: list[dict], fs: float,
-                 p_noise: ModelParams) -> None:
+    def __init__(
+        self,
+        ctx: Context,
+        name: str,
+        records: list[dict],
+        fs: float,
+        p_noise: ModelParams,
+    ) -> None:
         self.ctx = ctx
         self.fs = fs
         self.records = records
@@ -316,6 +359,7 @@ class TimeBlock(Block):
 
         def run():
             return self.ctx.case.simulate(p, reference=ref, force=frc)
+
         key = (p.key(("linear", "nonlin")), "rec", self.recording, i)
         return self.ctx.memo(key, run)
 
@@ -337,8 +381,11 @@ class TimeBlock(Block):
                     c = np.fft.rfft(fn(2 * np.pi * f0 * t))[keep] * w
                     pair.append(np.concatenate([c.real, c.imag]))
                 cols.append(tuple(pair))
-            amps = _line_amplitudes(self.ctx.case, p, "fe")
-            v = _remove_lines(np.concatenate([x.real, x.imag]), cols, amps)
+            v = _remove_lines(
+                np.concatenate([x.real, x.imag]),
+                cols,
+                _line_amplitudes(self.ctx.case, p, "fe"),
+            )
             m = x.size
             x = v[:m] + 1j * v[m:]
         return x
@@ -365,7 +412,9 @@ class CutBlock(TimeBlock):
 
     tags = SIM_TAGS + ("lines",)
 
-    def __init__(self, ctx: Context, name: str, data: dict, p_noise: ModelParams) -> None:
+    def __init__(
+        self, ctx: Context, name: str, data: dict, p_noise: ModelParams
+    ) -> None:
         """Build from a cut recording (``fs``, ``t``, ``fe``; loop at rest at t[0])."""
         fs = data["fs"]
         idx = np.rint(np.asarray(data["t"]) * fs).astype(np.int64)
@@ -376,8 +425,10 @@ class CutBlock(TimeBlock):
         if np.any(np.diff(idx) != 1):
             from ..errors import ConfigError
 
-            raise ConfigError(f"{name}: cut time_s must be one contiguous record at "
-                              "the controller rate")
+            raise ConfigError(
+                f"{name}: cut time_s must be one contiguous record at "
+                "the controller rate"
+            )
         self.k0 = int(idx[0])
         self.n_sim = int(idx.size)
         rec = {"fe": np.asarray(data["fe"], dtype=float), "t0": self.k0 / fs}
@@ -393,8 +444,9 @@ class CutBlock(TimeBlock):
 class ForceBlock(Block):
     """The force channel of a cut: measured minus the chip model, white noise."""
 
-    def __init__(self, ctx: Context, cut: CutBlock, force: np.ndarray,
-                 p0: ModelParams) -> None:
+    def __init__(
+        self, ctx: Context, cut: CutBlock, force: np.ndarray, p0: ModelParams
+    ) -> None:
         self.ctx = ctx
         self.cut = cut
         self.force = np.asarray(force, dtype=float)
@@ -403,8 +455,9 @@ class ForceBlock(Block):
         sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
         floor = 1e-4 * max(float(np.max(np.abs(self.force))), 1e-6)
         self.sigma = max(float(sig), floor)
-        super().__init__(recording=cut.recording, kind="cut", domain="force",
-                         n=int(self.force.size))
+        super().__init__(
+            recording=cut.recording, kind="cut", domain="force", n=int(self.force.size)
+        )
 
     tags = SIM_TAGS
 
@@ -416,11 +469,21 @@ class FRFBlock(Block):
     """A measured FRF: complex log-ratio residual with estimated relative noise."""
 
     tags = ("linear",)
-    _OUT = {"frf-open-loop": "open_loop", "frf-closed-loop": ("reference", "sensor"),
-            "frf-force": ("force", "sensor")}
+    _OUT = {
+        "frf-open-loop": "open_loop",
+        "frf-closed-loop": ("reference", "sensor"),
+        "frf-force": ("force", "sensor"),
+    }
 
-    def __init__(self, ctx: Context, name: str, kind: str, freq: np.ndarray,
-                 frf: np.ndarray, p0: ModelParams) -> None:
+    def __init__(
+        self,
+        ctx: Context,
+        name: str,
+        kind: str,
+        freq: np.ndarray,
+        frf: np.ndarray,
+        p0: ModelParams,
+    ) -> None:
         super().__init__(recording=name, kind=kind, domain="frf", n=0)
         self.ctx = ctx
         fs = ctx.case.fs
@@ -445,8 +508,10 @@ class FRFBlock(Block):
 
     def model(self, p: ModelParams) -> np.ndarray:
         """Model FRF at the block's frequencies under ``p``."""
-        return self.ctx.memo((p.key(("linear",)), "frf", self.recording),
-                             lambda: self.ctx.case.paths(p, self.freq)[self.key])
+        return self.ctx.memo(
+            (p.key(("linear",)), "frf", self.recording),
+            lambda: self.ctx.case.paths(p, self.freq)[self.key],
+        )
 
     def _raw(self, p: ModelParams) -> np.ndarray:
         h = self.model(p)
@@ -478,6 +543,7 @@ def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
         s[1:] = ctx.case.noise_psd(p, f[1:], "tool")
         r = np.fft.irfft(s, n) * fs / 2.0
         return r[: n // 2]
+
     r = ctx.memo((p.key(("linear", "sensor_noise")), "toolcov"), table)
     k = np.abs(np.asarray(lags)) * fs
     out = np.interp(k, np.arange(r.size), r, right=0.0)
@@ -505,13 +571,26 @@ class PointsBlock(Block):
 
     tags = ("linear", "nonlin", "force", "path", "tool", "lines")
 
-    def __init__(self, ctx: Context, name: str, kind: str, x: np.ndarray,
-                 y: np.ndarray, z: np.ndarray, p0: ModelParams, grid=None,
-                 along: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        ctx: Context,
+        name: str,
+        kind: str,
+        x: np.ndarray,
+        y: np.ndarray,
+        z: np.ndarray,
+        p0: ModelParams,
+        grid=None,
+        along: np.ndarray | None = None,
+    ) -> None:
         from ._surface import PointSet
 
-        super().__init__(recording=name, kind=kind,
-                         domain="map" if kind == "surface" else "profile", n=0)
+        super().__init__(
+            recording=name,
+            kind=kind,
+            domain="map" if kind == "surface" else "profile",
+            n=0,
+        )
         self.ctx = ctx
         self.grid = grid
         self.x_all, self.y_all = x, y
@@ -559,10 +638,12 @@ class PointsBlock(Block):
         for dx, dy in ((d, 0.0), (0.0, d)):
             if self.kind == "profile" and self.along is None and dy:
                 continue
-            hp = surface_heights(self.ctx.case, PointSet(self.ctx.case, x + dx, y + dy),
-                                 p0, traj)
-            hm = surface_heights(self.ctx.case, PointSet(self.ctx.case, x - dx, y - dy),
-                                 p0, traj)
+            hp = surface_heights(
+                self.ctx.case, PointSet(self.ctx.case, x + dx, y + dy), p0, traj
+            )
+            hm = surface_heights(
+                self.ctx.case, PointSet(self.ctx.case, x - dx, y - dy), p0, traj
+            )
             cols.append((hp - hm) / (2 * d) * 1e-6)
         return np.column_stack(cols)
 
@@ -570,8 +651,14 @@ class PointsBlock(Block):
         fs = self.ctx.case.fs
         n = self.z.size
         if self.kind == "surface":
-            self._pitch = float(min(np.min(np.abs(np.diff(np.unique(self.x_all))))
-                                    if np.unique(self.x_all).size > 1 else 1e-6, 1e-3))
+            self._pitch = float(
+                min(
+                    np.min(np.abs(np.diff(np.unique(self.x_all))))
+                    if np.unique(self.x_all).size > 1
+                    else 1e-6,
+                    1e-3,
+                )
+            )
         else:
             d = np.hypot(np.diff(self.x_all), np.diff(self.y_all))
             self._pitch = float(np.median(d)) if d.size else 1e-6
@@ -590,8 +677,9 @@ class PointsBlock(Block):
         self.counts = counts
         tb = np.zeros(nb)
         if nb:
-            tb = np.bincount(bins[bins >= 0], weights=self.tpass[self.cut],
-                             minlength=nb) / np.maximum(counts, 1)
+            tb = np.bincount(
+                bins[bins >= 0], weights=self.tpass[self.cut], minlength=nb
+            ) / np.maximum(counts, 1)
         self.tb = tb
         # instrument noise from the nominal residual: within-bin spread and uncut
         X = self._nuisance(p0)
@@ -601,11 +689,13 @@ class PointsBlock(Block):
         r0 = r0 - X @ coef
         dev = []
         if nb:
-            mb = np.bincount(bins[self.cut], weights=r0[self.cut], minlength=nb) \
-                / np.maximum(counts, 1)
+            mb = np.bincount(
+                bins[self.cut], weights=r0[self.cut], minlength=nb
+            ) / np.maximum(counts, 1)
             within = (r0[self.cut] - mb[bins[self.cut]])[counts[bins[self.cut]] > 1]
-            scale = np.sqrt(counts[bins[self.cut]] /
-                            np.maximum(counts[bins[self.cut]] - 1, 1))
+            scale = np.sqrt(
+                counts[bins[self.cut]] / np.maximum(counts[bins[self.cut]] - 1, 1)
+            )
             dev.append(within * scale[counts[bins[self.cut]] > 1])
         if (~self.cut).sum() > 8:
             u = r0[~self.cut]
@@ -632,11 +722,14 @@ class PointsBlock(Block):
                 try:
                     ch = np.linalg.cholesky(c)
                 except np.linalg.LinAlgError:
-                    ch = np.linalg.cholesky(c + np.eye(seg.size) * 1e-6 * np.trace(c)
-                                            / seg.size)
+                    ch = np.linalg.cholesky(
+                        c + np.eye(seg.size) * 1e-6 * np.trace(c) / seg.size
+                    )
                 self.segments.append((seg, ch))
-            inv = [sp.linalg.solve_triangular(ch, np.eye(seg.size), lower=True)
-                   for seg, ch in self.segments]
+            inv = [
+                sp.linalg.solve_triangular(ch, np.eye(seg.size), lower=True)
+                for seg, ch in self.segments
+            ]
             self.seg_index = np.concatenate([seg for seg, _ in self.segments])
             self.wbins = sp.sparse.block_diag(inv, format="csr")
         wx = self._whiten(X)
@@ -671,6 +764,7 @@ class PointsBlock(Block):
 
         def run():
             return surface_heights(self.ctx.case, self.pts, p, self.ctx.trajectory(p))
+
         return self.ctx.memo((p.key(self.tags[:-1]), "pts", id(self)), run)
 
     def predict_all(self, p: ModelParams) -> np.ndarray:
@@ -695,8 +789,9 @@ class PointsBlock(Block):
         w = self._whiten(self.z - self._predict(p))
         w = w - self.q @ (self.q.T @ w)
         if len(p.line_frequencies):
-            w = _remove_lines(w, self._line_cols(p),
-                              _line_amplitudes(self.ctx.case, p, "tool"))
+            w = _remove_lines(
+                w, self._line_cols(p), _line_amplitudes(self.ctx.case, p, "tool")
+            )
         return _finite(w)
 
     def nuisance_fit(self, p: ModelParams) -> np.ndarray:

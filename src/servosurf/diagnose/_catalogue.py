@@ -20,8 +20,16 @@ import numpy as np
 
 from ._sim import ModelParams
 
-__all__ = ["ParamDoc", "Config", "Free", "Locations", "Effect", "CATALOGUE",
-           "get_effect", "catalogue_table"]
+__all__ = [
+    "ParamDoc",
+    "Config",
+    "Free",
+    "Locations",
+    "Effect",
+    "CATALOGUE",
+    "get_effect",
+    "catalogue_table",
+]
 
 
 @dataclass(frozen=True)
@@ -84,6 +92,10 @@ class Locations:
         ``line_probe(f) -> m`` base amplitude giving one noise level in a bin.
     kinds : set of str
         Recording kinds present.
+    nominal : dict
+        Nominal values of the recalibrated parameters (SI).
+    fts : float
+        FTS (lenslet) frequency in Hz, 0 without a lenslet toolpath.
     """
 
     fs: float
@@ -103,6 +115,7 @@ class Locations:
     sensor_level: float = 1e-12
     specific_force: float = 2.6e9
     nominal: dict = field(default_factory=dict)
+    fts: float = 0.0
 
 
 class Effect:
@@ -122,6 +135,11 @@ class Effect:
     max_terms = 1
     #: recalibration modules are nuisance-like: reported apart
     recalibration = False
+    #: ``(domain, min deviance reduction)``: when blocks of that domain exist, an
+    #: accepted term must reduce their deviance at least this much (channel logic)
+    require: tuple | None = None
+    #: configurations fitted per round (several for multimodal parameters)
+    n_start = 1
 
     def n_params(self, cfg: Config | None = None) -> int:
         """Parameters counted by the selection criterion per term."""
@@ -142,13 +160,15 @@ class Effect:
         """Template models ``[(p_i, probe_i)]``: one per linear direction."""
         raise NotImplementedError  # pragma: no cover
 
-    def start(self, p: ModelParams, cfg: Config, coefs: np.ndarray,
-              loc: Locations) -> ModelParams:
+    def start(
+        self, p: ModelParams, cfg: Config, coefs: np.ndarray, loc: Locations
+    ) -> ModelParams:
         """Model with a new term started from the linear coefficients."""
         raise NotImplementedError  # pragma: no cover
 
-    def free(self, p: ModelParams, slot: int, loc: Locations,
-             cfg: Config | None = None) -> list[Free]:
+    def free(
+        self, p: ModelParams, slot: int, loc: Locations, cfg: Config | None = None
+    ) -> list[Free]:
         """Free parameters of term ``slot`` for the nonlinear fit."""
         raise NotImplementedError  # pragma: no cover
 
@@ -162,12 +182,25 @@ class Effect:
 
 
 def _f(attr: str, lo: float, hi: float, log: bool = False, name: str | None = None):
-    return Free(name or attr, lambda p: getattr(p, attr),
-                lambda p, v: p.replace(**{attr: float(v)}), lo, hi, log)
+    return Free(
+        name or attr,
+        lambda p: getattr(p, attr),
+        lambda p, v: p.replace(**{attr: float(v)}),
+        lo,
+        hi,
+        log,
+    )
 
 
-def _tuple_free(attr: str, i: int, lo: float, hi: float, log: bool = False,
-                name: str = "", cast=float):
+def _tuple_free(
+    attr: str,
+    i: int,
+    lo: float,
+    hi: float,
+    log: bool = False,
+    name: str = "",
+    cast=float,
+):
     def get(p):
         return getattr(p, attr)[i]
 
@@ -175,6 +208,7 @@ def _tuple_free(attr: str, i: int, lo: float, hi: float, log: bool = False,
         t = list(getattr(p, attr))
         t[i] = cast(v)
         return p.replace(**{attr: tuple(t)})
+
     return Free(name or f"{attr}[{i}]", get, set_, lo, hi, log)
 
 
@@ -182,32 +216,51 @@ def _tuple_free(attr: str, i: int, lo: float, hi: float, log: bool = False,
 class StructuralMode(Effect):
     name = "structural-mode"
     title = "Unmodelled structural resonance"
-    physics = ("A mode above the lumped model (tool shank, holder, FTS body rocking), "
-               "q'' + 2 zeta w q' + w^2 q = w^2 g Fa, adding q to tool and sensor.")
-    signature = ("FRFs: extra resonance/antiresonance pair; following error: "
-                 "spectral bump at f_r (idle, from current noise) and ringing after "
-                 "every lenslet cusp; map: ripple of wavelength v/f_r after cusps.")
-    confused_with = ("base-vibration-lines (a line is present at idle with fixed "
-                     "frequency and absent from the FRFs); loop-delay (phase only).")
-    channels = ("frf-open-loop", "frf-closed-loop", "frf-force", "following-error",
-                "cut", "surface", "profile")
+    physics = (
+        "A mode above the lumped model (tool shank, holder, FTS body rocking), "
+        "q'' + 2 zeta w q' + w^2 q = w^2 g Fa, adding q to tool and sensor."
+    )
+    signature = (
+        "FRFs: extra resonance/antiresonance pair; following error: "
+        "spectral bump at f_r (idle, from current noise) and ringing after "
+        "every lenslet cusp; map: ripple of wavelength v/f_r after cusps."
+    )
+    confused_with = (
+        "base-vibration-lines (a line is present at idle with fixed "
+        "frequency and absent from the FRFs); loop-delay (phase only)."
+    )
+    channels = (
+        "frf-open-loop",
+        "frf-closed-loop",
+        "frf-force",
+        "following-error",
+        "cut",
+        "surface",
+        "profile",
+    )
     tags = ("linear",)
-    params = (ParamDoc("frequency", "Hz", "natural frequency f_r"),
-              ParamDoc("damping_ratio", "1", "modal damping ratio zeta"),
-              ParamDoc("compliance", "m/N", "static compliance g from actuator force"))
+    params = (
+        ParamDoc("frequency", "Hz", "natural frequency f_r"),
+        ParamDoc("damping_ratio", "1", "modal damping ratio zeta"),
+        ParamDoc("compliance", "m/N", "static compliance g from actuator force"),
+    )
     zetas = (0.005, 0.02, 0.08)
+    n_start = 2
 
     def active(self, p):
         return p.has_mode
 
     def configs(self, loc, p):
         fr = list(loc.mode_freqs)
-        grid = np.geomspace(800.0, 0.4 * loc.fs, 14)
+        grid = np.geomspace(800.0, 0.4 * loc.fs, 22)
         for f in grid:
             if all(abs(math.log(f / g)) > 0.08 for g in fr):
                 fr.append(float(f))
-        return [Config(f"{f:.0f} Hz, zeta {z:g}", {"f": float(f), "z": z})
-                for f in fr for z in self.zetas]
+        return [
+            Config(f"{f:.0f} Hz, zeta {z:g}", {"f": float(f), "z": z})
+            for f in fr
+            for z in self.zetas
+        ]
 
     def _probe(self, cfg, loc):
         w = 2 * math.pi * cfg.values["f"]
@@ -215,22 +268,36 @@ class StructuralMode(Effect):
 
     def columns(self, p, cfg, loc):
         g = self._probe(cfg, loc)
-        return [(p.replace(mode_frequency=cfg.values["f"], mode_damping=cfg.values["z"],
-                           mode_gain=g), g)]
+        return [
+            (
+                p.replace(
+                    mode_frequency=cfg.values["f"],
+                    mode_damping=cfg.values["z"],
+                    mode_gain=g,
+                ),
+                g,
+            )
+        ]
 
     def start(self, p, cfg, coefs, loc):
         g = self._probe(cfg, loc) * max(float(coefs[0]), 0.05)
-        return p.replace(mode_frequency=cfg.values["f"], mode_damping=cfg.values["z"],
-                         mode_gain=g)
+        return p.replace(
+            mode_frequency=cfg.values["f"], mode_damping=cfg.values["z"], mode_gain=g
+        )
 
     def free(self, p, slot, loc, cfg=None):
-        return [_f("mode_frequency", 100.0, 0.45 * loc.fs, True),
-                _f("mode_damping", 1e-3, 0.5, True),
-                _f("mode_gain", 1e-16, 1e-5, True)]
+        return [
+            _f("mode_frequency", 100.0, 0.45 * loc.fs, True),
+            _f("mode_damping", 1e-3, 0.5, True),
+            _f("mode_gain", 1e-16, 1e-5, True),
+        ]
 
     def report(self, p, slot, loc):
-        return {"frequency": p.mode_frequency, "damping_ratio": p.mode_damping,
-                "compliance": p.mode_gain}
+        return {
+            "frequency": p.mode_frequency,
+            "damping_ratio": p.mode_damping,
+            "compliance": p.mode_gain,
+        }
 
     def remove(self, p, slot):
         return p.replace(mode_frequency=0.0, mode_gain=0.0, mode_damping=0.02)
@@ -239,15 +306,28 @@ class StructuralMode(Effect):
 class LoopDelay(Effect):
     name = "loop-delay"
     title = "Computation / transport delay"
-    physics = ("ADC/DAC pipeline, amplifier group delay: the command reaches the "
-               "amplifier tau later than modelled, u(t - tau) (fractional samples).")
-    signature = ("Open-loop FRF phase -w tau with unchanged magnitude; raised "
-                 "sensitivity hump near crossover in the idle following-error "
-                 "spectrum; lag error proportional to the command slope in cuts.")
-    confused_with = ("amplifier bandwidth (magnitude roll-off too); structural mode "
-                     "(magnitude peak); an angular encoder offset on maps (speed).")
-    channels = ("frf-open-loop", "frf-closed-loop", "frf-force", "following-error",
-                "cut", "surface", "profile")
+    physics = (
+        "ADC/DAC pipeline, amplifier group delay: the command reaches the "
+        "amplifier tau later than modelled, u(t - tau) (fractional samples)."
+    )
+    signature = (
+        "Open-loop FRF phase -w tau with unchanged magnitude; raised "
+        "sensitivity hump near crossover in the idle following-error "
+        "spectrum; lag error proportional to the command slope in cuts."
+    )
+    confused_with = (
+        "amplifier bandwidth (magnitude roll-off too); structural mode "
+        "(magnitude peak); an angular encoder offset on maps (speed)."
+    )
+    channels = (
+        "frf-open-loop",
+        "frf-closed-loop",
+        "frf-force",
+        "following-error",
+        "cut",
+        "surface",
+        "profile",
+    )
     tags = ("linear",)
     params = (ParamDoc("extra_delay", "s", "loop delay beyond the machine's"),)
 
@@ -255,8 +335,11 @@ class LoopDelay(Effect):
         return p.extra_delay != 0.0
 
     def configs(self, loc, p):
-        return [Config("+0.25 sample", {"d": 0.25}), Config("+1 sample", {"d": 1.0}),
-                Config("-0.25 sample", {"d": -0.25})]
+        return [
+            Config("+0.25 sample", {"d": 0.25}),
+            Config("+1 sample", {"d": 1.0}),
+            Config("-0.25 sample", {"d": -0.25}),
+        ]
 
     def columns(self, p, cfg, loc):
         d = cfg.values["d"] / loc.fs
@@ -279,19 +362,31 @@ class LoopDelay(Effect):
 class BaseLines(Effect):
     name = "base-vibration-lines"
     title = "Base vibration lines"
-    physics = ("Deterministic sinusoids in the base (mains harmonics, pumps, floor "
-               "modes) on top of the broadband base PSD, a_k cos(2 pi f_k t + phi).")
-    signature = ("Narrow lines in every following-error spectrum at fixed "
-                 "frequencies (idle too), not in the FRFs; on maps non-integer "
-                 "undulations per revolution (spiral moire).")
-    confused_with = ("spindle orders when k f_spindle coincides (change rpm); "
-                     "sensor EMI pickup (in the following error but not on the map); "
-                     "a very lightly damped structural mode (in the FRFs).")
+    physics = (
+        "Deterministic sinusoids in the base (mains harmonics, pumps, floor "
+        "modes) on top of the broadband base PSD, a_k cos(2 pi f_k t + phi)."
+    )
+    signature = (
+        "Narrow lines in every following-error spectrum at fixed "
+        "frequencies (idle too), not in the FRFs; on maps non-integer "
+        "undulations per revolution (spiral moire)."
+    )
+    confused_with = (
+        "spindle orders when k f_spindle coincides (change rpm); "
+        "sensor EMI pickup (in the following error but not on the map); "
+        "a very lightly damped structural mode (in the FRFs)."
+    )
     channels = ("following-error", "cut", "surface", "profile")
     tags = ("lines",)
-    params = (ParamDoc("frequency_k", "Hz", "frequency of line k"),
-              ParamDoc("amplitude_k", "m", "zero-to-peak base displacement of line k"))
+    params = (
+        ParamDoc("frequency_k", "Hz", "frequency of line k"),
+        ParamDoc("amplitude_k", "m", "zero-to-peak base displacement of line k"),
+    )
     max_terms = 8
+    #: a line must also be seen at idle when idle records exist (fixed frequency,
+    #: present with the spindle stopped): its deviance reduction there must exceed
+    #: this (chi2(2) at about p = 0.01)
+    require = ("spectrum", 9.0)
 
     def active(self, p):
         return len(p.line_frequencies) > 0
@@ -302,14 +397,18 @@ class BaseLines(Effect):
     def configs(self, loc, p):
         out = []
         for f in loc.line_freqs:
-            if all(abs(f - g) > 1.5 * loc.fs / loc.record_length
-                   for g in p.line_frequencies):
+            if all(
+                abs(f - g) > 1.5 * loc.fs / loc.record_length
+                for g in p.line_frequencies
+            ):
                 out.append(Config(f"{f:.1f} Hz", {"f": float(f)}))
         return out
 
     def _add(self, p, f, a):
-        return p.replace(line_frequencies=p.line_frequencies + (float(f),),
-                         line_amplitudes=p.line_amplitudes + (float(a),))
+        return p.replace(
+            line_frequencies=p.line_frequencies + (float(f),),
+            line_amplitudes=p.line_amplitudes + (float(a),),
+        )
 
     def columns(self, p, cfg, loc):
         a = loc.line_probe(cfg.values["f"])
@@ -322,14 +421,24 @@ class BaseLines(Effect):
     def free(self, p, slot, loc, cfg=None):
         f = p.line_frequencies[slot]
         df = 1.5 * loc.fs / loc.record_length
-        return [_tuple_free("line_frequencies", slot, max(f - df, 1.0), f + df,
-                            name=f"frequency_{slot + 1}"),
-                _tuple_free("line_amplitudes", slot, 1e-16, 1e-3, True,
-                            name=f"amplitude_{slot + 1}")]
+        return [
+            _tuple_free(
+                "line_frequencies",
+                slot,
+                max(f - df, 1.0),
+                f + df,
+                name=f"frequency_{slot + 1}",
+            ),
+            _tuple_free(
+                "line_amplitudes", slot, 1e-16, 1e-3, True, name=f"amplitude_{slot + 1}"
+            ),
+        ]
 
     def report(self, p, slot, loc):
-        return {f"frequency_{slot + 1}": p.line_frequencies[slot],
-                f"amplitude_{slot + 1}": p.line_amplitudes[slot]}
+        return {
+            f"frequency_{slot + 1}": p.line_frequencies[slot],
+            f"amplitude_{slot + 1}": p.line_amplitudes[slot],
+        }
 
     def remove(self, p, slot):
         f = list(p.line_frequencies)
@@ -341,18 +450,26 @@ class BaseLines(Effect):
 class ThermalDrift(Effect):
     name = "thermal-drift"
     title = "Thermal drift of the structural loop"
-    physics = ("Coil i^2 R heating, spindle warm-up, ambient: the tool-to-work "
-               "distance drifts, d(t) = a (1 - exp(-t / tau)) + b t, outside the loop.")
-    signature = ("Maps/profiles only: a slow trend against cutting time (piston steps "
-                 "between lenslet rings, a trend along each ring); none in the "
-                 "following error.")
-    confused_with = ("X-slide straightness (a function of radius, not time: cut with "
-                     "another feed); order-1 spindle axial error (repeats each turn).")
+    physics = (
+        "Coil i^2 R heating, spindle warm-up, ambient: the tool-to-work "
+        "distance drifts, d(t) = a (1 - exp(-t / tau)) + b t, outside the loop."
+    )
+    signature = (
+        "Maps/profiles only: a slow trend against cutting time (piston steps "
+        "between lenslet rings, a trend along each ring); none in the "
+        "following error."
+    )
+    confused_with = (
+        "X-slide straightness (a function of radius, not time: cut with "
+        "another feed); order-1 spindle axial error (repeats each turn)."
+    )
     channels = ("surface", "profile")
     tags = ("path",)
-    params = (ParamDoc("amplitude", "m", "saturating drift a"),
-              ParamDoc("time_constant", "s", "thermal time constant tau"),
-              ParamDoc("rate", "m/s", "linear drift rate b"))
+    params = (
+        ParamDoc("amplitude", "m", "saturating drift a"),
+        ParamDoc("time_constant", "s", "thermal time constant tau"),
+        ParamDoc("rate", "m/s", "linear drift rate b"),
+    )
     taus = (0.3, 1.0, 3.0, 10.0)
 
     def active(self, p):
@@ -390,18 +507,24 @@ class ThermalDrift(Effect):
         form = "both" if cfg is None else cfg.values["form"]
         out = []
         if form != "lin":
-            out += [_f("drift_amplitude", -1e-5, 1e-5),
-                    _f("drift_time_constant", 0.02, 1e3, True)]
+            out += [
+                _f("drift_amplitude", -1e-5, 1e-5),
+                _f("drift_time_constant", 0.02, 1e3, True),
+            ]
         if form != "exp":
             out.append(_f("drift_rate", -1e-5, 1e-5))
         return out
 
     def report(self, p, slot, loc):
-        return {"amplitude": p.drift_amplitude, "time_constant": p.drift_time_constant,
-                "rate": p.drift_rate}
+        return {
+            "amplitude": p.drift_amplitude,
+            "time_constant": p.drift_time_constant,
+            "rate": p.drift_rate,
+        }
 
     def remove(self, p, slot):
         return p.replace(drift_amplitude=0.0, drift_rate=0.0, drift_time_constant=1.0)
+
 
 class _PairEffect(Effect):
     """A module with two linear coefficients; configurations pick the sub-form.
@@ -421,17 +544,21 @@ class _PairEffect(Effect):
         return getattr(p, self.attrs[0]) != 0.0 or getattr(p, self.attrs[1]) != 0.0
 
     def configs(self, loc, p):
-        return [Config(self.labels[0], {"which": (0,)}),
-                Config(self.labels[1], {"which": (1,)}),
-                Config("both", {"which": (0, 1)})]
+        return [
+            Config(self.labels[0], {"which": (0,)}),
+            Config(self.labels[1], {"which": (1,)}),
+            Config("both", {"which": (0, 1)}),
+        ]
 
     def n_params(self, cfg=None):
         return 2 if cfg is None else len(cfg.values["which"])
 
     def columns(self, p, cfg, loc):
         pr = self._probes(loc)
-        return [(p.replace(**{self.attrs[i]: getattr(p, self.attrs[i]) + pr[i]}), pr[i])
-                for i in cfg.values["which"]]
+        return [
+            (p.replace(**{self.attrs[i]: getattr(p, self.attrs[i]) + pr[i]}), pr[i])
+            for i in cfg.values["which"]
+        ]
 
     def start(self, p, cfg, coefs, loc):
         pr = self._probes(loc)
@@ -443,8 +570,9 @@ class _PairEffect(Effect):
     def free(self, p, slot, loc, cfg=None):
         pr = self._probes(loc)
         which = (0, 1) if cfg is None else cfg.values["which"]
-        return [_f(self.attrs[i], -self.bound * pr[i], self.bound * pr[i])
-                for i in which]
+        return [
+            _f(self.attrs[i], -self.bound * pr[i], self.bound * pr[i]) for i in which
+        ]
 
     def remove(self, p, slot):
         return p.replace(**{a: 0.0 for a in self.attrs})
@@ -453,18 +581,26 @@ class _PairEffect(Effect):
 class FlexureNonlinearity(_PairEffect):
     name = "flexure-stiffness-nonlinearity"
     title = "Flexure stiffness nonlinearity"
-    physics = ("Large-deflection stiffening of the flexure bearing: extra force "
-               "-(k2q d^2 + k3 d^3) on the coil carrier, d = x2 - x3.")
-    signature = ("Commanded and cut following error: harmonics of the FTS frequency "
-                 "growing with stroke but not with speed; map: height-dependent "
-                 "shape error along the cut.")
-    confused_with = ("force-constant-position (its error multiplies the inertial "
-                     "force too, so it grows with rpm^2: needs a second speed); "
-                     "sensor-nonlinearity (invisible in the following error).")
+    physics = (
+        "Large-deflection stiffening of the flexure bearing: extra force "
+        "-(k2q d^2 + k3 d^3) on the coil carrier, d = x2 - x3."
+    )
+    signature = (
+        "Commanded and cut following error: harmonics of the FTS frequency "
+        "growing with stroke but not with speed; map: height-dependent "
+        "shape error along the cut."
+    )
+    confused_with = (
+        "force-constant-position (its error multiplies the inertial "
+        "force too, so it grows with rpm^2: needs a second speed); "
+        "sensor-nonlinearity (invisible in the following error)."
+    )
     channels = ("following-error", "cut", "surface", "profile")
     tags = ("nonlin",)
-    params = (ParamDoc("k_quadratic", "N/m^2", "quadratic flexure stiffness k2q"),
-              ParamDoc("k_cubic", "N/m^3", "cubic flexure stiffness k3"))
+    params = (
+        ParamDoc("k_quadratic", "N/m^2", "quadratic flexure stiffness k2q"),
+        ParamDoc("k_cubic", "N/m^3", "cubic flexure stiffness k3"),
+    )
     attrs = ("flexure_k2", "flexure_k3")
     labels = ("quadratic", "cubic")
 
@@ -479,17 +615,25 @@ class FlexureNonlinearity(_PairEffect):
 class ForceConstantPosition(_PairEffect):
     name = "force-constant-position"
     title = "Force constant depends on position, B*l(x)"
-    physics = ("The coil leaves the uniform gap field: Kf(x2) = Kf0 (1 + b1 x2 + "
-               "b2 x2^2) on the actuator force.")
-    signature = ("Commanded and cut following error: harmonics of the FTS frequency "
-                 "that grow with stroke and with speed (the inertial force is "
-                 "multiplied too); current per metre varies with position.")
-    confused_with = ("flexure-stiffness-nonlinearity (speed-independent); sensor-"
-                     "nonlinearity (no following-error or current signature).")
+    physics = (
+        "The coil leaves the uniform gap field: Kf(x2) = Kf0 (1 + b1 x2 + "
+        "b2 x2^2) on the actuator force."
+    )
+    signature = (
+        "Commanded and cut following error: harmonics of the FTS frequency "
+        "that grow with stroke and with speed (the inertial force is "
+        "multiplied too); current per metre varies with position."
+    )
+    confused_with = (
+        "flexure-stiffness-nonlinearity (speed-independent); sensor-"
+        "nonlinearity (no following-error or current signature)."
+    )
     channels = ("following-error", "cut", "surface", "profile")
     tags = ("nonlin",)
-    params = (ParamDoc("b1", "1/m", "linear position coefficient of Kf"),
-              ParamDoc("b2", "1/m^2", "quadratic position coefficient of Kf"))
+    params = (
+        ParamDoc("b1", "1/m", "linear position coefficient of Kf"),
+        ParamDoc("b2", "1/m^2", "quadratic position coefficient of Kf"),
+    )
     attrs = ("kf_b1", "kf_b2")
     labels = ("odd (b1)", "even (b2)")
     bound = 300.0
@@ -504,14 +648,20 @@ class ForceConstantPosition(_PairEffect):
 class AmplifierSaturation(Effect):
     name = "amplifier-saturation"
     title = "Amplifier current saturation"
-    physics = ("The current demand G_I u is clipped at +-I_max (voltage headroom at "
-               "steep flanks and cusps).")
-    signature = ("Commanded and cut following error: errors localised in time at the "
-                 "current peaks (cusps, start-up), thresholded, growing "
-                 "superlinearly with speed; flat-topped current.")
-    confused_with = ("stiffness or Kf(x) nonlinearity (position-, not "
-                     "current-dependent, present in slow air cuts); loop-delay "
-                     "(linear, not thresholded).")
+    physics = (
+        "The current demand G_I u is clipped at +-I_max (voltage headroom at "
+        "steep flanks and cusps)."
+    )
+    signature = (
+        "Commanded and cut following error: errors localised in time at the "
+        "current peaks (cusps, start-up), thresholded, growing "
+        "superlinearly with speed; flat-topped current."
+    )
+    confused_with = (
+        "stiffness or Kf(x) nonlinearity (position-, not "
+        "current-dependent, present in slow air cuts); loop-delay "
+        "(linear, not thresholded)."
+    )
     channels = ("following-error", "cut", "surface", "profile")
     tags = ("nonlin",)
     params = (ParamDoc("max_current", "A", "current limit I_max"),)
@@ -541,19 +691,27 @@ class AmplifierSaturation(Effect):
 class SensorNonlinearity(_PairEffect):
     name = "sensor-nonlinearity"
     title = "Capacitive-sensor nonlinearity"
-    physics = ("The reading is y = x + a2 x^2 + a3 x^3; the loop makes the reading "
-               "follow the command, so the tool misses by -a2 z^2 - a3 z^3.")
-    signature = ("Invisible in the following error; maps/profiles: a height-"
-                 "dependent error along the cut, identical in every lenslet "
-                 "(quadratic: lenslet shape error ~ z^2).")
-    confused_with = ("force-constant-position and flexure nonlinearity (both show in "
-                     "the following error); elastic-recovery (linear in depth and "
-                     "varies across the cut); a sensor gain error looks like "
-                     "elastic recovery on single-pass lenslets.")
+    physics = (
+        "The reading is y = x + a2 x^2 + a3 x^3; the loop makes the reading "
+        "follow the command, so the tool misses by -a2 z^2 - a3 z^3."
+    )
+    signature = (
+        "Invisible in the following error; maps/profiles: a height-"
+        "dependent error along the cut, identical in every lenslet "
+        "(quadratic: lenslet shape error ~ z^2)."
+    )
+    confused_with = (
+        "force-constant-position and flexure nonlinearity (both show in "
+        "the following error); elastic-recovery (linear in depth and "
+        "varies across the cut); a sensor gain error looks like "
+        "elastic recovery on single-pass lenslets."
+    )
     channels = ("surface", "profile")
     tags = ("path",)
-    params = (ParamDoc("a2", "1/m", "quadratic sensor coefficient"),
-              ParamDoc("a3", "1/m^2", "cubic sensor coefficient"))
+    params = (
+        ParamDoc("a2", "1/m", "quadratic sensor coefficient"),
+        ParamDoc("a3", "1/m^2", "cubic sensor coefficient"),
+    )
     attrs = ("sensor_a2", "sensor_a3")
     labels = ("quadratic (a2)", "cubic (a3)")
     bound = 1e4
@@ -568,19 +726,27 @@ class SensorNonlinearity(_PairEffect):
 class SensorNoiseShape(Effect):
     name = "sensor-noise-shape"
     title = "Sensor noise floor and roll-off differ"
-    physics = ("The capacitive sensor's white floor (electronics) and its roll-off "
-               "corner differ from the calibration: Ws(f) = (level^2 (f/f0)^s + "
-               "floor^2) / (1 + (f/corner)^order).")
-    signature = ("Idle following-error spectrum: broadband excess or deficit above "
-                 "the bandwidth (where sensor noise dominates), changing shape at "
-                 "the corner; none in FRFs or deterministic responses.")
-    confused_with = ("a 1/f sensor-noise excess (rises towards low frequency: not "
-                     "this module); current-noise level (dominates below the "
-                     "bandwidth).")
+    physics = (
+        "The capacitive sensor's white floor (electronics) and its roll-off "
+        "corner differ from the calibration: Ws(f) = (level^2 (f/f0)^s + "
+        "floor^2) / (1 + (f/corner)^order)."
+    )
+    signature = (
+        "Idle following-error spectrum: broadband excess or deficit above "
+        "the bandwidth (where sensor noise dominates), changing shape at "
+        "the corner; none in FRFs or deterministic responses."
+    )
+    confused_with = (
+        "a 1/f sensor-noise excess (rises towards low frequency: not "
+        "this module); current-noise level (dominates below the "
+        "bandwidth)."
+    )
     channels = ("following-error",)
     tags = ("sensor_noise",)
-    params = (ParamDoc("floor", "m/sqrt(Hz)", "white floor of the sensor noise"),
-              ParamDoc("corner", "Hz", "roll-off corner of the sensor noise"))
+    params = (
+        ParamDoc("floor", "m/sqrt(Hz)", "white floor of the sensor noise"),
+        ParamDoc("corner", "Hz", "roll-off corner of the sensor noise"),
+    )
 
     def active(self, p):
         return p.sensor_floor is not None or p.sensor_corner is not None
@@ -595,19 +761,24 @@ class SensorNoiseShape(Effect):
 
     def columns(self, p, cfg, loc):
         fl, co = self._cur(p, loc)
-        return [(p.replace(sensor_floor=self._probe_floor(loc), sensor_corner=co), 1.0),
-                (p.replace(sensor_floor=fl, sensor_corner=co * 1.05), 1.0)]
+        return [
+            (p.replace(sensor_floor=self._probe_floor(loc), sensor_corner=co), 1.0),
+            (p.replace(sensor_floor=fl, sensor_corner=co * 1.05), 1.0),
+        ]
 
     def start(self, p, cfg, coefs, loc):
         fl, co = self._cur(p, loc)
         f2 = fl**2 + float(coefs[0]) * (self._probe_floor(loc) ** 2 - fl**2)
-        return p.replace(sensor_floor=math.sqrt(max(f2, (0.02 * loc.sensor_level) ** 2)),
-                         sensor_corner=co * (1.0 + 0.05 * float(np.clip(coefs[1], -10,
-                                                                         10))))
+        return p.replace(
+            sensor_floor=math.sqrt(max(f2, (0.02 * loc.sensor_level) ** 2)),
+            sensor_corner=co * (1.0 + 0.05 * float(np.clip(coefs[1], -10, 10))),
+        )
 
     def free(self, p, slot, loc, cfg=None):
-        return [_f("sensor_floor", 1e-16, 1e-8, True),
-                _f("sensor_corner", 100.0, 0.5 * loc.fs, True)]
+        return [
+            _f("sensor_floor", 1e-16, 1e-8, True),
+            _f("sensor_corner", 100.0, 0.5 * loc.fs, True),
+        ]
 
     def report(self, p, slot, loc):
         fl, co = self._cur(p, loc)
@@ -620,18 +791,26 @@ class SensorNoiseShape(Effect):
 class ToolEdgeWaviness(Effect):
     name = "tool-edge-waviness"
     title = "Tool nose (edge) waviness"
-    physics = ("The diamond edge is not a circle: an outward deviation "
-               "W(phi) = sum c_k P_k(phi / phi_ref), k = 3..6 (Legendre in the "
-               "contact angle over the cut's range) lowers the surface by W / cos phi.")
-    signature = ("Maps only: an error depending on the contact angle (the radial "
-                 "offset across the cut), identical in every lenslet, ring and "
-                 "speed; orders >= 3 in phi.")
-    confused_with = ("tool-radius-error (the order-2 part); elastic-recovery (also "
-                     "across the cut, but follows the depth along the cut too).")
+    physics = (
+        "The diamond edge is not a circle: an outward deviation "
+        "W(phi) = sum c_k P_k(phi / phi_ref), k = 3..6 (Legendre in the "
+        "contact angle over the cut's range) lowers the surface by W / cos phi."
+    )
+    signature = (
+        "Maps only: an error depending on the contact angle (the radial "
+        "offset across the cut), identical in every lenslet, ring and "
+        "speed; orders >= 3 in phi."
+    )
+    confused_with = (
+        "tool-radius-error (the order-2 part); elastic-recovery (also "
+        "across the cut, but follows the depth along the cut too)."
+    )
     channels = ("surface", "profile")
     tags = ("tool",)
-    params = tuple(ParamDoc(f"p{k}", "m", f"Legendre coefficient of order {k}")
-                   for k in (3, 4, 5, 6))
+    params = tuple(
+        ParamDoc(f"p{k}", "m", f"Legendre coefficient of order {k}")
+        for k in (3, 4, 5, 6)
+    )
 
     def active(self, p):
         return len(p.waviness) > 0 and any(c != 0.0 for c in p.waviness)
@@ -649,8 +828,9 @@ class ToolEdgeWaviness(Effect):
         return p.replace(waviness=tuple(1e-9 * np.asarray(coefs, dtype=float)))
 
     def free(self, p, slot, loc, cfg=None):
-        return [_tuple_free("waviness", k, -1e-6, 1e-6, name=f"p{k + 3}")
-                for k in range(4)]
+        return [
+            _tuple_free("waviness", k, -1e-6, 1e-6, name=f"p{k + 3}") for k in range(4)
+        ]
 
     def report(self, p, slot, loc):
         w = list(p.waviness) + [0.0] * (4 - len(p.waviness))
@@ -663,13 +843,19 @@ class ToolEdgeWaviness(Effect):
 class ToolRadiusError(Effect):
     name = "tool-radius-error"
     title = "Tool nose radius error"
-    physics = ("The nose radius is R + dR instead of R (tip held): the surface "
-               "across the cut changes by dR (1 - R / sqrt(R^2 - dr^2)) ~ -dR dr^2 / "
-               "(2 R^2).")
-    signature = ("Maps only: error quadratic in the radial offset across the cut "
-                 "(contact angle), identical along the cut, in every lenslet.")
-    confused_with = ("tool-edge-waviness (orders >= 3); elastic-recovery (also "
-                     "follows the depth along the cut).")
+    physics = (
+        "The nose radius is R + dR instead of R (tip held): the surface "
+        "across the cut changes by dR (1 - R / sqrt(R^2 - dr^2)) ~ -dR dr^2 / "
+        "(2 R^2)."
+    )
+    signature = (
+        "Maps only: error quadratic in the radial offset across the cut "
+        "(contact angle), identical along the cut, in every lenslet."
+    )
+    confused_with = (
+        "tool-edge-waviness (orders >= 3); elastic-recovery (also "
+        "follows the depth along the cut)."
+    )
     channels = ("surface", "profile")
     tags = ("tool",)
     params = (ParamDoc("radius_error", "m", "nose radius error dR"),)
@@ -696,14 +882,20 @@ class ToolRadiusError(Effect):
 class CuttingForceCoefficient(Effect):
     name = "cutting-force-coefficient"
     title = "Specific cutting force differs"
-    physics = ("The thrust per chip area (specific cutting energy, size effect) is "
-               "k_t instead of the nominal value: F = k_t A_chip.")
-    signature = ("Cut: force and following error scale with the chip area (only "
-                 "while cutting, absent in air cuts); maps: deviation proportional "
-                 "to the local force.")
-    confused_with = ("damping or stiffness calibration errors (also in air cuts); "
-                     "ploughing below the minimum chip thickness (not proportional "
-                     "to the area).")
+    physics = (
+        "The thrust per chip area (specific cutting energy, size effect) is "
+        "k_t instead of the nominal value: F = k_t A_chip."
+    )
+    signature = (
+        "Cut: force and following error scale with the chip area (only "
+        "while cutting, absent in air cuts); maps: deviation proportional "
+        "to the local force."
+    )
+    confused_with = (
+        "damping or stiffness calibration errors (also in air cuts); "
+        "ploughing below the minimum chip thickness (not proportional "
+        "to the area)."
+    )
     channels = ("cut", "surface", "profile")
     tags = ("force",)
     params = (ParamDoc("specific_force", "N/m^2", "thrust force per chip area k_t"),)
@@ -716,8 +908,10 @@ class CuttingForceCoefficient(Effect):
         return [(p.replace(specific_force=k * 1.01), 0.01 * k)]
 
     def start(self, p, cfg, coefs, loc):
-        return p.replace(specific_force=loc.specific_force
-                         * (1 + 0.01 * float(np.clip(coefs[0], -90, 500))))
+        return p.replace(
+            specific_force=loc.specific_force
+            * (1 + 0.01 * float(np.clip(coefs[0], -90, 500)))
+        )
 
     def free(self, p, slot, loc, cfg=None):
         return [_f("specific_force", 1e6, 1e12, True)]
@@ -732,18 +926,26 @@ class CuttingForceCoefficient(Effect):
 class SpindleAxialError(Effect):
     name = "spindle-axial-error"
     title = "Synchronous spindle axial error motion"
-    physics = ("Thrust-bearing face error, unbalance, motor cogging: the work moves "
-               "axially by sum a_h cos(h theta + phi_h), outside the FTS loop.")
-    signature = ("Not in the following error. Maps/profiles: integer orders per "
-                 "revolution, the same at every radius (spokes), stable across "
-                 "rings and speeds.")
-    confused_with = ("lenslet-count orders; base lines when h f_spindle is a line "
-                     "frequency (change rpm); clamping distortion (2-3 UPR, static).")
+    physics = (
+        "Thrust-bearing face error, unbalance, motor cogging: the work moves "
+        "axially by sum a_h cos(h theta + phi_h), outside the FTS loop."
+    )
+    signature = (
+        "Not in the following error. Maps/profiles: integer orders per "
+        "revolution, the same at every radius (spokes), stable across "
+        "rings and speeds."
+    )
+    confused_with = (
+        "lenslet-count orders; base lines when h f_spindle is a line "
+        "frequency (change rpm); clamping distortion (2-3 UPR, static)."
+    )
     channels = ("surface", "profile")
     tags = ("path",)
-    params = (ParamDoc("order_k", "1", "undulations per revolution of term k"),
-              ParamDoc("amplitude_k", "m", "amplitude of term k"),
-              ParamDoc("phase_k", "rad", "phase of term k"))
+    params = (
+        ParamDoc("order_k", "1", "undulations per revolution of term k"),
+        ParamDoc("amplitude_k", "m", "amplitude of term k"),
+        ParamDoc("phase_k", "rad", "phase of term k"),
+    )
     max_terms = 4
 
     def n_params(self, cfg=None):
@@ -756,55 +958,82 @@ class SpindleAxialError(Effect):
         return len(p.spindle_orders)
 
     def configs(self, loc, p):
-        return [Config(f"order {h}", {"h": int(h)}) for h in loc.orders
-                if int(h) not in p.spindle_orders]
+        return [
+            Config(f"order {h}", {"h": int(h)})
+            for h in loc.orders
+            if int(h) not in p.spindle_orders
+        ]
 
     def _add(self, p, h, a, ph):
-        return p.replace(spindle_orders=p.spindle_orders + (int(h),),
-                         spindle_amplitudes=p.spindle_amplitudes + (float(a),),
-                         spindle_phases=p.spindle_phases + (float(ph),))
+        return p.replace(
+            spindle_orders=p.spindle_orders + (int(h),),
+            spindle_amplitudes=p.spindle_amplitudes + (float(a),),
+            spindle_phases=p.spindle_phases + (float(ph),),
+        )
 
     def columns(self, p, cfg, loc):
         h = cfg.values["h"]
-        return [(self._add(p, h, 1e-9, 0.0), 1e-9),
-                (self._add(p, h, 1e-9, -math.pi / 2), 1e-9)]
+        return [
+            (self._add(p, h, 1e-9, 0.0), 1e-9),
+            (self._add(p, h, 1e-9, -math.pi / 2), 1e-9),
+        ]
 
     def start(self, p, cfg, coefs, loc):
         c1, c2 = float(coefs[0]), float(coefs[1])
-        return self._add(p, cfg.values["h"], 1e-9 * math.hypot(c1, c2),
-                         math.atan2(-c2, c1))
+        return self._add(
+            p, cfg.values["h"], 1e-9 * math.hypot(c1, c2), math.atan2(-c2, c1)
+        )
 
     def free(self, p, slot, loc, cfg=None):
-        return [_tuple_free("spindle_amplitudes", slot, 0.0, 1e-5,
-                            name=f"amplitude_{slot + 1}"),
-                _tuple_free("spindle_phases", slot, -4 * math.pi, 4 * math.pi,
-                            name=f"phase_{slot + 1}")]
+        return [
+            _tuple_free(
+                "spindle_amplitudes", slot, 0.0, 1e-5, name=f"amplitude_{slot + 1}"
+            ),
+            _tuple_free(
+                "spindle_phases",
+                slot,
+                -4 * math.pi,
+                4 * math.pi,
+                name=f"phase_{slot + 1}",
+            ),
+        ]
 
     def report(self, p, slot, loc):
         ph = (p.spindle_phases[slot] + math.pi) % (2 * math.pi) - math.pi
-        return {f"order_{slot + 1}": float(p.spindle_orders[slot]),
-                f"amplitude_{slot + 1}": p.spindle_amplitudes[slot],
-                f"phase_{slot + 1}": ph}
+        return {
+            f"order_{slot + 1}": float(p.spindle_orders[slot]),
+            f"amplitude_{slot + 1}": p.spindle_amplitudes[slot],
+            f"phase_{slot + 1}": ph,
+        }
 
     def remove(self, p, slot):
         o = list(p.spindle_orders)
         a = list(p.spindle_amplitudes)
         ph = list(p.spindle_phases)
         del o[slot], a[slot], ph[slot]
-        return p.replace(spindle_orders=tuple(o), spindle_amplitudes=tuple(a),
-                         spindle_phases=tuple(ph))
+        return p.replace(
+            spindle_orders=tuple(o),
+            spindle_amplitudes=tuple(a),
+            spindle_phases=tuple(ph),
+        )
 
 
 class ElasticRecovery(Effect):
     name = "elastic-recovery"
     title = "Elastic recovery (spring-back)"
-    physics = ("The work springs back behind the flank by a fraction eps of the "
-               "local depth of cut: dz = eps (top - z).")
-    signature = ("Maps only: a sag error proportional to the local depth, both along "
-                 "and across the cut (shallower lenslets); no servo signature.")
-    confused_with = ("tool-radius-error (across the cut only); sensor gain error "
-                     "(identical on single-pass lenslets; compare with a facing cut); "
-                     "cutting-force-coefficient (has a force signature).")
+    physics = (
+        "The work springs back behind the flank by a fraction eps of the "
+        "local depth of cut: dz = eps (top - z)."
+    )
+    signature = (
+        "Maps only: a sag error proportional to the local depth, both along "
+        "and across the cut (shallower lenslets); no servo signature."
+    )
+    confused_with = (
+        "tool-radius-error (across the cut only); sensor gain error "
+        "(identical on single-pass lenslets; compare with a facing cut); "
+        "cutting-force-coefficient (has a force signature)."
+    )
     channels = ("surface", "profile")
     tags = ("tool",)
     params = (ParamDoc("recovery", "1", "fraction eps of the depth that springs back"),)
@@ -831,19 +1060,30 @@ class ElasticRecovery(Effect):
 class Recalibration(Effect):
     name = "recalibration"
     title = "Recalibration of machine parameters"
-    physics = ("Not missing physics: a wrong moving mass, flexure stiffness or "
-               "damping, or force constant (Brynjarsdottir and O'Hagan: wrong "
-               "parameters and missing physics mimic each other).")
-    signature = ("FRFs and following error: smooth changes of level and phase around "
-                 "the suspension mode and the crossover.")
+    physics = (
+        "Not missing physics: a wrong moving mass, flexure stiffness or "
+        "damping, or force constant (Brynjarsdottir and O'Hagan: wrong "
+        "parameters and missing physics mimic each other)."
+    )
+    signature = (
+        "FRFs and following error: smooth changes of level and phase around "
+        "the suspension mode and the crossover."
+    )
     confused_with = "loop-delay, structural-mode (low frequency)."
-    channels = ("frf-open-loop", "frf-closed-loop", "frf-force", "following-error",
-                "cut")
+    channels = (
+        "frf-open-loop",
+        "frf-closed-loop",
+        "frf-force",
+        "following-error",
+        "cut",
+    )
     tags = ("linear",)
-    params = (ParamDoc("moving_mass", "kg", "m1 + m2"),
-              ParamDoc("flexure_stiffness", "N/m", "k2"),
-              ParamDoc("flexure_damping", "N s/m", "c2"),
-              ParamDoc("force_constant", "N/A", "B*l"))
+    params = (
+        ParamDoc("moving_mass", "kg", "m1 + m2"),
+        ParamDoc("flexure_stiffness", "N/m", "k2"),
+        ParamDoc("flexure_damping", "N s/m", "c2"),
+        ParamDoc("force_constant", "N/A", "B*l"),
+    )
     recalibration = True
     _attrs = ("moving_mass", "flexure_stiffness", "flexure_damping", "force_constant")
     _steps = (1.01, 1.02, 1.1, 1.01)
@@ -884,10 +1124,21 @@ class Recalibration(Effect):
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
 CATALOGUE: tuple[Effect, ...] = (
-    StructuralMode(), LoopDelay(), BaseLines(), ThermalDrift(), FlexureNonlinearity(),
-    ForceConstantPosition(), AmplifierSaturation(), SensorNonlinearity(),
-    SensorNoiseShape(), ToolEdgeWaviness(), ToolRadiusError(), CuttingForceCoefficient(),
-    SpindleAxialError(), ElasticRecovery(), Recalibration(),
+    StructuralMode(),
+    LoopDelay(),
+    BaseLines(),
+    ThermalDrift(),
+    FlexureNonlinearity(),
+    ForceConstantPosition(),
+    AmplifierSaturation(),
+    SensorNonlinearity(),
+    SensorNoiseShape(),
+    ToolEdgeWaviness(),
+    ToolRadiusError(),
+    CuttingForceCoefficient(),
+    SpindleAxialError(),
+    ElasticRecovery(),
+    Recalibration(),
 )
 
 
@@ -901,9 +1152,18 @@ def get_effect(name: str) -> Effect:
 
 def catalogue_table() -> list[dict]:
     """The catalogue as JSON-ready dicts (name, parameters with units, signature)."""
-    return [{"effect": e.name, "title": e.title, "physics": e.physics,
-             "parameters": [{"name": q.name, "unit": q.unit, "doc": q.doc}
-                            for q in e.params],
-             "signature": e.signature, "confused_with": e.confused_with,
-             "visible_in": list(e.channels), "recalibration": e.recalibration}
-            for e in CATALOGUE]
+    return [
+        {
+            "effect": e.name,
+            "title": e.title,
+            "physics": e.physics,
+            "parameters": [
+                {"name": q.name, "unit": q.unit, "doc": q.doc} for q in e.params
+            ],
+            "signature": e.signature,
+            "confused_with": e.confused_with,
+            "visible_in": list(e.channels),
+            "recalibration": e.recalibration,
+        }
+        for e in CATALOGUE
+    ]

@@ -16,7 +16,11 @@ __all__ = ["_nl_loop", "_segment_area"]
 
 _FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 _CACHE = os.environ.get("SERVOSURF_NUMBA_CACHE", "1").strip().lower() not in (
-    "0", "false", "off", "no")
+    "0",
+    "false",
+    "off",
+    "no",
+)
 
 
 @njit(cache=_CACHE, fastmath=_FASTMATH)
@@ -31,13 +35,39 @@ def _segment_area(radius, depth):
         depth = radius
     h = radius - depth
     return radius * radius * math.acos(h / radius) - h * math.sqrt(
-        max(2.0 * radius * depth - depth * depth, 0.0))
+        max(2.0 * radius * depth - depth * depth, 0.0)
+    )
 
 
 @njit(cache=_CACHE, fastmath=_FASTMATH)
-def _nl_loop(ad, bd, cx, ac, bc, cc, dc, sens, nd, frac, r, f_ext, i_n, s_n,
-             chip_kt, chip_radius, chip_top, chip_area, u_max, kf_b1, kf_b2,
-             flex_k2, flex_k3, bl, sat_on, out):
+def _nl_loop(
+    ad,
+    bd,
+    cx,
+    ac,
+    bc,
+    cc,
+    dc,
+    sens,
+    nd,
+    frac,
+    r,
+    f_ext,
+    i_n,
+    s_n,
+    chip_kt,
+    chip_radius,
+    chip_top,
+    chip_area,
+    u_max,
+    kf_b1,
+    kf_b2,
+    flex_k2,
+    flex_k3,
+    bl,
+    sat_on,
+    out,
+):
     """Simulate the discrete FTS loop with memoryless nonlinear modules.
 
     Parameters

@@ -25,13 +25,22 @@ import numpy as np
 import scipy as sp
 import scipy.ndimage  # noqa: F401  (sp.ndimage)
 
-from ._blocks import CutBlock, ForceBlock, FRFBlock, PointsBlock, SpectralBlock, TimeBlock
+from ._blocks import (
+    CutBlock,
+    ForceBlock,
+    FRFBlock,
+    PointsBlock,
+    SpectralBlock,
+    TimeBlock,
+)
 from ._sim import ModelParams
 
 __all__ = ["Mismatch", "ALPHA", "locate", "third_octaves", "tag_frequency"]
 
 #: Family-wise false-alarm rate of each family of tests.
 ALPHA = 1e-4
+#: Largest reported significance (-log10 p); beyond it p is "zero".
+MAX_SIGNIFICANCE = 1000.0
 
 
 @dataclass
@@ -63,9 +72,14 @@ class Mismatch:
 
     def to_dict(self) -> dict:
         """JSON-ready form."""
-        return {"recording": self.recording, "domain": self.domain, "where": self.where,
-                "significance": round(float(self.significance), 2), "test": self.test,
-                **({"details": self.details} if self.details else {})}
+        return {
+            "recording": self.recording,
+            "domain": self.domain,
+            "where": self.where,
+            "significance": round(float(self.significance), 2),
+            "test": self.test,
+            **({"details": self.details} if self.details else {}),
+        }
 
 
 def _chi2_logsf(x, dof):
@@ -81,7 +95,22 @@ def _chi2_logsf(x, dof):
         k = np.broadcast_to(np.asarray(dof, dtype=float), x.shape)[bad]
         z = ((x[bad] / k) ** (1 / 3) - (1 - 2 / (9 * k))) / np.sqrt(2 / (9 * k))
         v[bad] = sp.stats.norm.logsf(z)
-    out = v / math.log(10.0)
+    out = np.maximum(v / math.log(10.0), -MAX_SIGNIFICANCE)
+    return float(out) if out.ndim == 0 else out
+
+
+def _chi2_logcdf(x, dof):
+    """log10 of the lower tail of chi2(dof) at x (a deficit), finite."""
+    x = np.asarray(x, dtype=float)
+    v = np.asarray(sp.stats.chi2.logcdf(x, dof), dtype=float)
+    bad = ~np.isfinite(v)
+    if np.any(bad):
+        k = np.broadcast_to(np.asarray(dof, dtype=float), x.shape)[bad]
+        z = ((np.maximum(x[bad], 0.0) / k) ** (1 / 3) - (1 - 2 / (9 * k))) / np.sqrt(
+            2 / (9 * k)
+        )
+        v[bad] = sp.stats.norm.logcdf(z)
+    out = np.maximum(v / math.log(10.0), -MAX_SIGNIFICANCE)
     return float(out) if out.ndim == 0 else out
 
 
@@ -112,17 +141,31 @@ def _bands(freq, stat, dof, n_tests, rec, domain, test, label, lower=False):
         lp = _chi2_logsf(s, d) + math.log10(n_tests)
         if lp < math.log10(ALPHA):
             ratio = s / d
-            out.append(Mismatch(rec, domain, f"{label} {f_lo:.0f}-{f_hi:.0f} Hz: "
-                                f"power x{ratio:.3g} of the model", -lp, test,
-                                {"band_hz": [float(f_lo), float(f_hi)],
-                                 "ratio": float(ratio)}))
+            out.append(
+                Mismatch(
+                    rec,
+                    domain,
+                    f"{label} {f_lo:.0f}-{f_hi:.0f} Hz: "
+                    f"power x{ratio:.3g} of the model",
+                    -lp,
+                    test,
+                    {"band_hz": [float(f_lo), float(f_hi)], "ratio": float(ratio)},
+                )
+            )
         if lower:
-            lc = sp.stats.chi2.logcdf(s, d) / math.log(10.0) + math.log10(n_tests)
+            lc = _chi2_logcdf(s, d) + math.log10(n_tests)
             if lc < math.log10(ALPHA):
-                out.append(Mismatch(rec, domain, f"{label} {f_lo:.0f}-{f_hi:.0f} Hz: "
-                                    f"power x{s / d:.3g} of the model (deficit)", -lc,
-                                    test, {"band_hz": [float(f_lo), float(f_hi)],
-                                           "ratio": float(s / d)}))
+                out.append(
+                    Mismatch(
+                        rec,
+                        domain,
+                        f"{label} {f_lo:.0f}-{f_hi:.0f} Hz: "
+                        f"power x{s / d:.3g} of the model (deficit)",
+                        -lc,
+                        test,
+                        {"band_hz": [float(f_lo), float(f_hi)], "ratio": float(s / d)},
+                    )
+                )
     return out
 
 
@@ -137,18 +180,25 @@ def _spectral(b: SpectralBlock, p: ModelParams, refs: dict) -> list[Mismatch]:
     stat = np.bincount(idx, weights=2 * R * u, minlength=nb)[:nb]
     dof = 2 * R * np.bincount(idx, minlength=nb)[:nb]
     nt = int((dof > 0).sum())
-    out += _bands(edges, stat, dof, nt, b.recording, "spectrum", "band-power",
-                  "band", lower=True)
+    out += _bands(
+        edges, stat, dof, nt, b.recording, "spectrum", "band-power", "band", lower=True
+    )
     # lines: per-bin chi2(2R)
     lp = _chi2_logsf(2 * R * u, 2 * R) + math.log10(u.size)
     sig = np.nonzero(lp < math.log10(ALPHA))[0]
     df = b.fs / b.nsamp
     for k in _peaks(sig, u)[:12]:
         f = float(b.freq[k])
-        out.append(Mismatch(b.recording, "spectrum",
-                            f"line at {f:.1f} Hz ({tag_frequency(f, df, refs)}): power "
-                            f"x{u[k]:.3g}", -float(lp[k]), "line",
-                            {"frequency_hz": f, "ratio": float(u[k])}))
+        out.append(
+            Mismatch(
+                b.recording,
+                "spectrum",
+                f"line at {f:.1f} Hz ({tag_frequency(f, df, refs)}): power x{u[k]:.3g}",
+                -float(lp[k]),
+                "line",
+                {"frequency_hz": f, "ratio": float(u[k])},
+            )
+        )
     return out
 
 
@@ -191,16 +241,25 @@ def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mism
         x = b.whitened(p, i)
         e = x.real**2 + x.imag**2
         if not np.all(np.isfinite(e)):
-            out.append(Mismatch(b.recording, dom, "simulation diverged", 300.0, "global"))
+            out.append(
+                Mismatch(b.recording, dom, "simulation diverged", 300.0, "global")
+            )
             continue
         edges = third_octaves(f[0], f[-1] * 1.0001)
         idx = np.digitize(f, edges) - 1
         nb = edges.size - 1
         stat = np.bincount(idx, weights=e, minlength=nb)[:nb]
         dof = 2 * np.bincount(idx, minlength=nb)[:nb]
-        out += _bands(edges, stat, dof, int((dof > 0).sum()), b.recording, dom,
-                      "band-power", f"record {i + 1}, band" if len(b.meta) > 1
-                      else "band")
+        out += _bands(
+            edges,
+            stat,
+            dof,
+            int((dof > 0).sum()),
+            b.recording,
+            dom,
+            "band-power",
+            f"record {i + 1}, band" if len(b.meta) > 1 else "band",
+        )
         df = b.fs / b.records[i]["fe"].size
         if f0 > 0:
             ks = np.arange(1, int(min(f[-1], 40 * f0) / f0) + 1)
@@ -210,19 +269,32 @@ def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mism
                     continue
                 lp = _chi2_logsf(e[j], 2) + math.log10(ks.size)
                 if lp < math.log10(ALPHA):
-                    out.append(Mismatch(b.recording, dom, f"harmonic {k} of the "
-                                        f"{f0:.4g} Hz command ({f[j]:.1f} Hz)", -lp,
-                                        "harmonic", {"frequency_hz": float(f[j]),
-                                                     "harmonic": int(k)}))
+                    out.append(
+                        Mismatch(
+                            b.recording,
+                            dom,
+                            f"harmonic {k} of the {f0:.4g} Hz command ({f[j]:.1f} Hz)",
+                            -lp,
+                            "harmonic",
+                            {"frequency_hz": float(f[j]), "harmonic": int(k)},
+                        )
+                    )
         lp = _chi2_logsf(e, 2) + math.log10(e.size)
         sig = np.nonzero(lp < math.log10(ALPHA))[0]
         for k in _peaks(sig, e)[:8]:
             fk = float(f[k])
             if f0 > 0 and abs(fk / f0 - round(fk / f0)) * f0 <= df:
                 continue
-            out.append(Mismatch(b.recording, dom, f"line at {fk:.1f} Hz "
-                                f"({tag_frequency(fk, df, refs)})", -float(lp[k]),
-                                "line", {"frequency_hz": fk}))
+            out.append(
+                Mismatch(
+                    b.recording,
+                    dom,
+                    f"line at {fk:.1f} Hz ({tag_frequency(fk, df, refs)})",
+                    -float(lp[k]),
+                    "line",
+                    {"frequency_hz": fk},
+                )
+            )
         # time windows of the whitened residual
         wt = b.whitened_time(p, i)
         n = wt.size
@@ -235,29 +307,45 @@ def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mism
             if lp[j] < math.log10(ALPHA):
                 t0 = b.records[i].get("t0", 0.0) + j * nw / b.fs
                 frac = float((lp < math.log10(ALPHA)).mean())
-                out.append(Mismatch(b.recording, dom, f"time {1e3 * t0:.2f}-"
-                                    f"{1e3 * (t0 + nw / b.fs):.2f} ms (strongest of "
-                                    f"{100 * frac:.0f} % flagged windows)", -float(lp[j]),
-                                    "time-window", {"t_s": [t0, t0 + nw / b.fs],
-                                                    "flagged_fraction": frac}))
+                out.append(
+                    Mismatch(
+                        b.recording,
+                        dom,
+                        f"time {1e3 * t0:.2f}-"
+                        f"{1e3 * (t0 + nw / b.fs):.2f} ms (strongest of "
+                        f"{100 * frac:.0f} % flagged windows)",
+                        -float(lp[j]),
+                        "time-window",
+                        {"t_s": [t0, t0 + nw / b.fs], "flagged_fraction": frac},
+                    )
+                )
         if f0 > 0:
             per = b.fs / f0
             ncyc = int(n // per)
             if ncyc >= 3:
                 nph = 20
-                ph = np.floor((np.arange(int(ncyc * per)) % per) / per * nph).astype(int)
+                ph = np.floor((np.arange(int(ncyc * per)) % per) / per * nph).astype(
+                    int
+                )
                 sums = np.bincount(ph, weights=wt[: ph.size], minlength=nph)
                 cnt = np.bincount(ph, minlength=nph)
                 z2 = sums**2 / np.maximum(cnt, 1)
                 lp = _chi2_logsf(z2, 1) + math.log10(nph)
                 j = int(np.argmin(lp))
                 if lp[j] < math.log10(ALPHA):
-                    out.append(Mismatch(b.recording, dom, f"locked to the command "
-                                        f"cycle at phase {j / nph:.2f}-"
-                                        f"{(j + 1) / nph:.2f} ({1e3 * j / nph / f0:.2f} "
-                                        "ms after the cycle start)", -float(lp[j]),
-                                        "cycle-phase", {"phase": [j / nph,
-                                                                  (j + 1) / nph]}))
+                    out.append(
+                        Mismatch(
+                            b.recording,
+                            dom,
+                            f"locked to the command "
+                            f"cycle at phase {j / nph:.2f}-"
+                            f"{(j + 1) / nph:.2f} ({1e3 * j / nph / f0:.2f} "
+                            "ms after the cycle start)",
+                            -float(lp[j]),
+                            "cycle-phase",
+                            {"phase": [j / nph, (j + 1) / nph]},
+                        )
+                    )
     return out
 
 
@@ -268,10 +356,18 @@ def _force(b: ForceBlock, p: ModelParams) -> list[Mismatch]:
     if lp < math.log10(ALPHA):
         F = b.cut.predict(p)["force"]
         c = float(np.dot(r, F) / max(np.linalg.norm(F) * np.linalg.norm(r), 1e-300))
-        return [Mismatch(b.recording, "force", f"measured force differs from the chip "
-                         f"model (RMS x{math.sqrt(r @ r / n):.3g} of the noise; "
-                         f"correlation with the modelled force {c:+.2f})", -lp,
-                         "global", {"correlation": c})]
+        return [
+            Mismatch(
+                b.recording,
+                "force",
+                f"measured force differs from the chip "
+                f"model (RMS x{math.sqrt(r @ r / n):.3g} of the noise; "
+                f"correlation with the modelled force {c:+.2f})",
+                -lp,
+                "global",
+                {"correlation": c},
+            )
+        ]
     return []
 
 
@@ -298,13 +394,22 @@ def _frf(b: FRFBlock, p: ModelParams) -> list[Mismatch]:
                 k = np.argmax(np.abs(v[sel]))
                 fk = float(b.freq[sel][k])
                 val = float(v[sel][k] * b.sigma)
-                txt = (f"{100 * (math.exp(val) - 1):+.2g} %" if part == "magnitude"
-                       else f"{math.degrees(val):+.2g} deg")
-                out.append(Mismatch(b.recording, "frf", f"{part} {f_lo:.0f}-{f_hi:.0f} "
-                                    f"Hz (largest {txt} at {fk:.0f} Hz)", -lp,
-                                    f"frf-{part}", {"band_hz": [float(f_lo),
-                                                                float(f_hi)],
-                                                    "frequency_hz": fk}))
+                txt = (
+                    f"{100 * (math.exp(val) - 1):+.2g} %"
+                    if part == "magnitude"
+                    else f"{math.degrees(val):+.2g} deg"
+                )
+                out.append(
+                    Mismatch(
+                        b.recording,
+                        "frf",
+                        f"{part} {f_lo:.0f}-{f_hi:.0f} "
+                        f"Hz (largest {txt} at {fk:.0f} Hz)",
+                        -lp,
+                        f"frf-{part}",
+                        {"band_hz": [float(f_lo), float(f_hi)], "frequency_hz": fk},
+                    )
+                )
     return out
 
 
@@ -318,19 +423,79 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
     if n_unc:
         parts.append(("uncut top (instrument noise, piston, tilt)", w[:n_unc]))
     if n_cut:
-        parts.append(("across the cut (contact angle: tool shape, recovery)",
-                      w[n_unc:n_unc + n_cut]))
-        parts.append(("along the cut (tool height in time: servo, sensor, drift, "
-                      "spindle)", w[n_unc + n_cut:]))
+        parts.append(
+            (
+                "across the cut (contact angle: tool shape, recovery)",
+                w[n_unc : n_unc + n_cut],
+            )
+        )
+        parts.append(
+            (
+                "along the cut (tool height in time: servo, sensor, drift, spindle)",
+                w[n_unc + n_cut :],
+            )
+        )
     for label, v in parts:
         if v.size == 0:
             continue
         dof = v.size if "across" not in label else max(n_cut - b.nb, 1)
         lp = _chi2_logsf(float(v @ v), dof) + math.log10(len(parts))
         if lp < math.log10(ALPHA):
-            out.append(Mismatch(b.recording, dom, f"{label}: RMS x"
-                                f"{math.sqrt(float(v @ v) / dof):.3g} of the noise",
-                                -lp, "part", {}))
+            out.append(
+                Mismatch(
+                    b.recording,
+                    dom,
+                    f"{label}: RMS x{math.sqrt(float(v @ v) / dof):.3g} of the noise",
+                    -lp,
+                    "part",
+                    {},
+                )
+            )
+    # patterns repeating in every lenslet (folded on the FTS period) and a drift
+    # across the array (trend in cutting time): GLS tests of indicator templates
+    fts = (
+        getattr(b.ctx.case.toolpath.path, "frequency", 0.0)
+        if b.ctx.case.toolpath.kind == "lenslet"
+        else 0.0
+    )
+    if n_cut and b.segments and len(b.segments) >= 4:
+        tc = b.tpass[b.cut]
+        tests = []
+        if fts > 0:
+            nph = 16
+            ph = np.floor(np.mod(tc * fts, 1.0) * nph).astype(int)
+            cols = np.zeros((b.z.size, nph))
+            cols[np.nonzero(b.cut)[0], ph] = 1.0
+            tests.append(
+                (
+                    "repeating in every lenslet (same lenslet phase)",
+                    cols,
+                    "lenslet-phase",
+                    nph,
+                )
+            )
+        cols = np.zeros((b.z.size, 1))
+        cols[b.cut, 0] = (tc - tc.mean()) / max(np.ptp(tc), 1e-9)
+        tests.append(
+            ("drifting across the array (trend in cutting time)", cols, "trend", 1)
+        )
+        for label, cols, test, dof in tests:
+            wc = b._whiten(cols)
+            wc = wc - b.q @ (b.q.T @ wc)
+            c, *_ = np.linalg.lstsq(wc, w, rcond=None)
+            lam = float(np.sum((wc @ c) ** 2))
+            lp = _chi2_logsf(lam, dof) + math.log10(2)
+            if lp < math.log10(ALPHA):
+                out.append(
+                    Mismatch(
+                        b.recording,
+                        dom,
+                        label,
+                        -lp,
+                        test,
+                        {"statistic": lam, "dof": dof},
+                    )
+                )
     # lines in the tool height: periodogram of the along-cut residual on a regular
     # time grid (gaps zero-filled), peaks against the local median, then an exact
     # GLS test of the few strongest
@@ -367,10 +532,18 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
                         lam = float(np.sum((wc @ c) ** 2))
                         lp = _chi2_logsf(lam, 2) + math.log10(max(sel.sum(), 1))
                         if lp < math.log10(ALPHA):
-                            out.append(Mismatch(b.recording, dom, f"line at {f0:.2f} Hz "
-                                                "in the tool height (fixed frequency, "
-                                                "not locked to the spindle)", -lp,
-                                                "line", {"frequency_hz": f0}))
+                            out.append(
+                                Mismatch(
+                                    b.recording,
+                                    dom,
+                                    f"line at {f0:.2f} Hz "
+                                    "in the tool height (fixed frequency, "
+                                    "not locked to the spindle)",
+                                    -lp,
+                                    "line",
+                                    {"frequency_hz": f0},
+                                )
+                            )
     # integer spindle orders: GLS test of cos/sin(h theta) templates (chi2(2))
     if n_cut:
         th = b.pts.theta
@@ -386,7 +559,7 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
             lam = np.zeros(hmax)
             amp = np.zeros(hmax)
             for h in range(hmax):
-                t2 = wc[:, 2 * h:2 * h + 2]
+                t2 = wc[:, 2 * h : 2 * h + 2]
                 c, *_ = np.linalg.lstsq(t2, w, rcond=None)
                 lam[h] = float(np.sum((t2 @ c) ** 2))
                 amp[h] = math.hypot(c[0], c[1])
@@ -394,11 +567,16 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
             for h in np.argsort(lp)[:4]:
                 sig = bool(lp[h] < math.log10(ALPHA))
                 if sig:
-                    out.append(Mismatch(b.recording, dom, f"spindle order {h + 1} "
-                                        f"(amplitude {amp[h] * 1e9:.3g} nm)",
-                                        -float(lp[h]), "spindle-order",
-                                        {"order": int(h + 1),
-                                         "amplitude_m": float(amp[h])}))
+                    out.append(
+                        Mismatch(
+                            b.recording,
+                            dom,
+                            f"spindle order {h + 1} (amplitude {amp[h] * 1e9:.3g} nm)",
+                            -float(lp[h]),
+                            "spindle-order",
+                            {"order": int(h + 1), "amplitude_m": float(amp[h])},
+                        )
+                    )
             b.order_candidates = [int(k + 1) for k in np.argsort(lp)[:4]]
     return out
 

@@ -60,17 +60,48 @@ from ..errors import ConfigError
 __all__ = ["KINDS", "Manifest", "Recording", "load_manifest", "read_recording"]
 
 #: Recording kinds accepted in a manifest.
-KINDS = ("following-error", "frf-open-loop", "frf-closed-loop", "frf-force", "cut",
-         "surface", "profile")
+KINDS = (
+    "following-error",
+    "frf-open-loop",
+    "frf-closed-loop",
+    "frf-force",
+    "cut",
+    "surface",
+    "profile",
+)
 
-_CASE_KEYS = {"machine", "toolpath", "bandwidth", "moving-mass", "disturbances",
-              "specific-cutting-force", "workpiece", "name", "description"}
-_ALIASES = {"mass": "moving-mass", "moving_mass": "moving-mass",
-            "bandwidth-hz": "bandwidth", "bandwidth_hz": "bandwidth",
-            "moving-mass-kg": "moving-mass", "specific_cutting_force":
-            "specific-cutting-force"}
-_REC_KEYS = {"path", "kind", "name", "condition", "radius", "angle-start", "start",
-             "direction", "x0", "y0", "description"}
+_CASE_KEYS = {
+    "machine",
+    "toolpath",
+    "bandwidth",
+    "moving-mass",
+    "disturbances",
+    "specific-cutting-force",
+    "workpiece",
+    "name",
+    "description",
+}
+_ALIASES = {
+    "mass": "moving-mass",
+    "moving_mass": "moving-mass",
+    "bandwidth-hz": "bandwidth",
+    "bandwidth_hz": "bandwidth",
+    "moving-mass-kg": "moving-mass",
+    "specific_cutting_force": "specific-cutting-force",
+}
+_REC_KEYS = {
+    "path",
+    "kind",
+    "name",
+    "condition",
+    "radius",
+    "angle-start",
+    "start",
+    "direction",
+    "x0",
+    "y0",
+    "description",
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -143,7 +174,9 @@ def _number(value: Any, name: str, where: str, *, positive: bool = True) -> floa
         raise ConfigError(f"{where}: {name} must be a number, got {value!r}")
     v = float(value)
     if not math.isfinite(v) or (positive and v <= 0):
-        raise ConfigError(f"{where}: {name} must be a positive finite number, got {v!r}")
+        raise ConfigError(
+            f"{where}: {name} must be a positive finite number, got {v!r}"
+        )
     return v
 
 
@@ -184,13 +217,17 @@ def load_manifest(path: str | Path) -> Manifest:
             case.setdefault(k, data.pop(k))
     if data:
         k = next(iter(data))
-        raise ConfigError(f"{path}: unknown key {k!r}"
-                          f"{_suggest(k, _CASE_KEYS | {'case', 'recording'})}")
+        raise ConfigError(
+            f"{path}: unknown key {k!r}"
+            f"{_suggest(k, _CASE_KEYS | {'case', 'recording'})}"
+        )
     norm = {}
     for k, v in case.items():
         k2 = _ALIASES.get(k, k)
         if k2 not in _CASE_KEYS:
-            raise ConfigError(f"{path}: unknown case key {k!r}{_suggest(k, _CASE_KEYS)}")
+            raise ConfigError(
+                f"{path}: unknown case key {k!r}{_suggest(k, _CASE_KEYS)}"
+            )
         norm[k2] = v
     where = str(path)
     machine = str(norm.get("machine", "seed-prototype"))
@@ -199,27 +236,41 @@ def load_manifest(path: str | Path) -> Manifest:
     if machine not in builtin_machines():
         mp = (base / machine) if not Path(machine).is_absolute() else Path(machine)
         if not mp.is_file():
-            raise ConfigError(f"{where}: machine {machine!r}: no such file and no "
-                              f"built-in of that name ({', '.join(builtin_machines())})")
+            raise ConfigError(
+                f"{where}: machine {machine!r}: no such file and no "
+                f"built-in of that name ({', '.join(builtin_machines())})"
+            )
         machine = str(mp)
     toolpath = None
     if "toolpath" in norm:
         tp = Path(str(norm["toolpath"]))
-        cands = [tp if tp.is_absolute() else base / tp, Path("toolpaths") / tp,
-                 Path("toolpaths") / (tp.name if tp.suffix else tp.name + ".toml")]
+        cands = [
+            tp if tp.is_absolute() else base / tp,
+            Path("toolpaths") / tp,
+            Path("toolpaths") / (tp.name if tp.suffix else tp.name + ".toml"),
+        ]
         found = next((c for c in cands if c.is_file()), None)
         if found is None:
             raise ConfigError(f"{where}: toolpath {str(tp)!r}: no such file")
         toolpath = found
-    bandwidth = _number(norm["bandwidth"], "bandwidth (Hz)", where) \
-        if "bandwidth" in norm else None
-    mass = _number(norm["moving-mass"], "moving-mass (kg)", where) \
-        if "moving-mass" in norm else None
+    bandwidth = (
+        _number(norm["bandwidth"], "bandwidth (Hz)", where)
+        if "bandwidth" in norm
+        else None
+    )
+    mass = (
+        _number(norm["moving-mass"], "moving-mass (kg)", where)
+        if "moving-mass" in norm
+        else None
+    )
     kt = None
     if "workpiece" in norm:
         wp = Path(str(norm["workpiece"]))
-        cands = [wp if wp.is_absolute() else base / wp, Path("workpieces") / wp,
-                 Path("workpieces") / (wp.name + ".toml")]
+        cands = [
+            wp if wp.is_absolute() else base / wp,
+            Path("workpieces") / wp,
+            Path("workpieces") / (wp.name + ".toml"),
+        ]
         found = next((c for c in cands if c.is_file()), None)
         if found is None:
             raise ConfigError(f"{where}: workpiece {str(wp)!r}: no such file")
@@ -227,25 +278,32 @@ def load_manifest(path: str | Path) -> Manifest:
 
         kt = float(load_workpiece(found).material.specific_thrust_pressure)
     if "specific-cutting-force" in norm:
-        kt = _number(norm["specific-cutting-force"], "specific-cutting-force (N/m^2)",
-                     where)
+        kt = _number(
+            norm["specific-cutting-force"], "specific-cutting-force (N/m^2)", where
+        )
     dist = norm.get("disturbances")
     if recs is None or not isinstance(recs, list) or not recs:
-        raise ConfigError(f"{where}: no [[recording]] entries (each needs path and kind)")
+        raise ConfigError(
+            f"{where}: no [[recording]] entries (each needs path and kind)"
+        )
     out = []
     for i, rec in enumerate(recs):
         if not isinstance(rec, dict):
             raise ConfigError(f"{where}: recording {i + 1} must be a table")
         for k in rec:
             if k not in _REC_KEYS:
-                raise ConfigError(f"{where}: recording {i + 1}: unknown key {k!r}"
-                                  f"{_suggest(k, _REC_KEYS)}")
+                raise ConfigError(
+                    f"{where}: recording {i + 1}: unknown key {k!r}"
+                    f"{_suggest(k, _REC_KEYS)}"
+                )
         if "path" not in rec or "kind" not in rec:
             raise ConfigError(f"{where}: recording {i + 1} needs 'path' and 'kind'")
         kind = str(rec["kind"])
         if kind not in KINDS:
-            raise ConfigError(f"{where}: recording {i + 1}: unknown kind {kind!r} "
-                              f"(kinds: {', '.join(KINDS)})")
+            raise ConfigError(
+                f"{where}: recording {i + 1}: unknown kind {kind!r} "
+                f"(kinds: {', '.join(KINDS)})"
+            )
         rp = Path(str(rec["path"]))
         rp = rp if rp.is_absolute() else base / rp
         if not rp.is_file():
@@ -254,22 +312,37 @@ def load_manifest(path: str | Path) -> Manifest:
             raise ConfigError(f"{where}: a {kind!r} recording needs case.toolpath")
         opts = {k: v for k, v in rec.items() if k not in ("path", "kind", "name")}
         name = str(rec.get("name", rp.name))
-        out.append(Recording(name=name, kind=kind, path=rp,
-                             data=read_recording(rp, kind), options=opts))
+        out.append(
+            Recording(
+                name=name,
+                kind=kind,
+                path=rp,
+                data=read_recording(rp, kind),
+                options=opts,
+            )
+        )
     names = [r.name for r in out]
     if len(set(names)) != len(names):
         raise ConfigError(f"{where}: recording names must be unique, got {names}")
-    return Manifest(path=path, machine=machine, toolpath=toolpath, bandwidth=bandwidth,
-                    moving_mass=mass, disturbances=None if dist is None else str(dist),
-                    specific_force=kt, recordings=tuple(out))
+    return Manifest(
+        path=path,
+        machine=machine,
+        toolpath=toolpath,
+        bandwidth=bandwidth,
+        moving_mass=mass,
+        disturbances=None if dist is None else str(dist),
+        specific_force=kt,
+        recordings=tuple(out),
+    )
 
 
 # ---------------------------------------------------------------- readers
 def _read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...]):
     try:
         with open(path, newline="") as fh:
-            rows = [r for r in csv.reader(ln for ln in fh if not ln.startswith("#"))
-                    if r]
+            rows = [
+                r for r in csv.reader(ln for ln in fh if not ln.startswith("#")) if r
+            ]
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read CSV: {exc}") from None
     if not rows:
@@ -277,16 +350,20 @@ def _read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...]):
     header = [c.strip().lower() for c in rows[0]]
     missing = [c for c in required if c not in header]
     if missing:
-        raise ConfigError(f"{path}: bad CSV header {','.join(header)!r}: expected "
-                          f"columns {','.join(required)}"
-                          + (f" (optional {','.join(optional)})" if optional else ""))
+        raise ConfigError(
+            f"{path}: bad CSV header {','.join(header)!r}: expected "
+            f"columns {','.join(required)}"
+            + (f" (optional {','.join(optional)})" if optional else "")
+        )
     cols = {c: header.index(c) for c in (*required, *optional) if c in header}
     try:
-        arr = np.array([[float(r[i]) for i in cols.values()] for r in rows[1:]],
-                       dtype=float)
+        arr = np.array(
+            [[float(r[i]) for i in cols.values()] for r in rows[1:]], dtype=float
+        )
     except (ValueError, IndexError):
-        raise ConfigError(f"{path}: every row must hold numbers in the columns "
-                          f"{','.join(cols)}") from None
+        raise ConfigError(
+            f"{path}: every row must hold numbers in the columns {','.join(cols)}"
+        ) from None
     if arr.ndim != 2 or arr.shape[0] < 8:
         raise ConfigError(f"{path}: need at least 8 rows of data")
     if not np.all(np.isfinite(arr)):
@@ -336,13 +413,16 @@ def _read_following(path: Path) -> dict:
                 if key in z:
                     a = np.atleast_2d(np.asarray(z[key], dtype=float))
                     if a.shape != fe.shape:
-                        raise ConfigError(f"{path}: {key} shape {a.shape} differs from "
-                                          f"following_error_m {fe.shape}")
+                        raise ConfigError(
+                            f"{path}: {key} shape {a.shape} differs from "
+                            f"following_error_m {fe.shape}"
+                        )
                     rec[name] = a[i]
             recs.append(rec)
     else:
-        cols = _read_csv(path, ("time_s", "following_error_m"),
-                         ("command_m", "force_n", "record"))
+        cols = _read_csv(
+            path, ("time_s", "following_error_m"), ("command_m", "force_n", "record")
+        )
         t = cols["time_s"]
         brk = np.nonzero(np.diff(t) <= 0)[0] + 1
         if "record" in cols:
@@ -378,8 +458,12 @@ def _read_cut(path: Path) -> dict:
     else:
         cols = _read_csv(path, ("time_s", "force_n", "following_error_m"), ())
     fs = _fs_from_time(cols["time_s"], path)
-    return {"fs": fs, "t": cols["time_s"], "force": cols["force_n"],
-            "fe": cols["following_error_m"]}
+    return {
+        "fs": fs,
+        "t": cols["time_s"],
+        "force": cols["force_n"],
+        "fe": cols["following_error_m"],
+    }
 
 
 def _read_frf(path: Path) -> dict:
@@ -397,8 +481,11 @@ def _read_surface(path: Path) -> dict:
         if not all(k in z for k in ("z", "dx", "dy")):
             raise ConfigError(f"{path}: surface NPZ needs z, dx, dy (m)")
         zz = np.asarray(z["z"], dtype=float)
-        out = {"z": zz, "dx": float(np.ravel(z["dx"])[0]),
-               "dy": float(np.ravel(z["dy"])[0])}
+        out = {
+            "z": zz,
+            "dx": float(np.ravel(z["dx"])[0]),
+            "dy": float(np.ravel(z["dy"])[0]),
+        }
         for k in ("x0", "y0"):
             if k in z:
                 out[k] = float(np.ravel(z[k])[0])
@@ -406,8 +493,10 @@ def _read_surface(path: Path) -> dict:
         try:
             from ..io import read_surface  # written by another engineer
         except ImportError:
-            raise ConfigError(f"{path}: only .npz surfaces (z, dx, dy) can be read "
-                              "here (servosurf.io.read_surface is unavailable)") from None
+            raise ConfigError(
+                f"{path}: only .npz surfaces (z, dx, dy) can be read "
+                "here (servosurf.io.read_surface is unavailable)"
+            ) from None
         s = read_surface(path)
         if s.dx is None or s.dy is None:
             raise ConfigError(f"{path}: the surface has no lateral calibration")
@@ -426,16 +515,20 @@ def _read_profile(path: Path) -> dict:
         z = _load_npz(path)
         if not all(k in z for k in ("z", "dx")):
             raise ConfigError(f"{path}: profile NPZ needs z and dx (m)")
-        out = {"z": np.asarray(z["z"], dtype=float).ravel(),
-               "dx": float(np.ravel(z["dx"])[0])}
+        out = {
+            "z": np.asarray(z["z"], dtype=float).ravel(),
+            "dx": float(np.ravel(z["dx"])[0]),
+        }
         if "x0" in z:
             out["x0"] = float(np.ravel(z["x0"])[0])
     else:
         try:
             from ..io import read_profile  # written by another engineer
         except ImportError:
-            raise ConfigError(f"{path}: only .npz profiles (z, dx) can be read here "
-                              "(servosurf.io.read_profile is unavailable)") from None
+            raise ConfigError(
+                f"{path}: only .npz profiles (z, dx) can be read here "
+                "(servosurf.io.read_profile is unavailable)"
+            ) from None
         p = read_profile(path)
         out = {"z": np.asarray(p.z, dtype=float), "dx": float(p.dx), "x0": float(p.x0)}
     if out["z"].size < 8 or not out["dx"] > 0:

@@ -14,7 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._blocks import CutBlock, ForceBlock, FRFBlock, PointsBlock, SpectralBlock, TimeBlock
+from ._blocks import (
+    CutBlock,
+    ForceBlock,
+    FRFBlock,
+    PointsBlock,
+    SpectralBlock,
+    TimeBlock,
+)
 from ._locate import third_octaves
 from ._sim import ModelParams
 
@@ -33,8 +40,9 @@ def _marks(ax, mism, rec, *, scale=1.0, time=False):
         if time and "t_s" in d:
             ax.axvspan(d["t_s"][0] * scale, d["t_s"][1] * scale, color="C3", alpha=0.15)
         elif not time and "band_hz" in d:
-            ax.axvspan(d["band_hz"][0] * scale, d["band_hz"][1] * scale, color="C3",
-                       alpha=0.12)
+            ax.axvspan(
+                d["band_hz"][0] * scale, d["band_hz"][1] * scale, color="C3", alpha=0.12
+            )
         elif not time and "frequency_hz" in d:
             ax.axvline(d["frequency_hz"] * scale, color="C3", lw=0.8, ls=":")
 
@@ -55,8 +63,10 @@ def _spectrum(b: SpectralBlock, d, path: Path) -> Path:
 
     fig, ax = figure(figsize=(8, 4.5))
     ax.loglog(b.freq, b.pbar, color="0.75", lw=0.6, label="measured (averaged)")
-    for p, lab, st in ((ModelParams(), "model before", "C0--"), (d.params, "after",
-                                                                 "C3-")):
+    for p, lab, st in (
+        (ModelParams(), "model before", "C0--"),
+        (d.params, "after", "C3-"),
+    ):
         ax.loglog(b.freq, b.expected(p), st, lw=1.2, label=lab)
     _marks(ax, d.mismatches, b.recording)
     ax.set_xlabel("frequency [Hz]")
@@ -81,11 +91,22 @@ def _timeseries(b: TimeBlock, d, force: ForceBlock | None, path: Path) -> Path:
         _, w, f = b.meta[0]
         x = b.whitened(p, 0)
         fc, e = _bands(f, np.abs(x) ** 2)
-        ax[1].semilogx(fc, e, "o-" if lab == "after" else "s--", color=c, ms=3,
-                       label=f"whitened power {lab}")
+        ax[1].semilogx(
+            fc,
+            e,
+            "o-" if lab == "after" else "s--",
+            color=c,
+            ms=3,
+            label=f"whitened power {lab}",
+        )
         if force is not None:
-            ax[2].plot(t, (force.force - force.cut.predict(p)["force"]) * 1e3, color=c,
-                       lw=0.5, label=f"force residual {lab}")
+            ax[2].plot(
+                t,
+                (force.force - force.cut.predict(p)["force"]) * 1e3,
+                color=c,
+                lw=0.5,
+                label=f"force residual {lab}",
+            )
     ax[1].axhline(2.0, color="0.5", lw=0.8, ls=":")
     _marks(ax[0], d.mismatches, b.recording, scale=1e3, time=True)
     _marks(ax[1], d.mismatches, b.recording)
@@ -132,19 +153,25 @@ def _points(b: PointsBlock, d, path: Path, nominal: PointsBlock | None) -> Path:
         shape, flat = b.grid
         fig, ax = figure(1, 2, figsize=(11, 4.5))
         keep_nom = (nominal or b).keep
-        for a, vals, keep, lab in ((ax[0], before, keep_nom, "before"),
-                                   (ax[1], after, b.keep, "after")):
+        for a, vals, keep, lab in (
+            (ax[0], before, keep_nom, "before"),
+            (ax[1], after, b.keep, "after"),
+        ):
             img = np.full(shape[0] * shape[1], np.nan)
             img[flat[keep]] = vals * 1e9
             lim = np.nanpercentile(np.abs(img), 99) or 1.0
-            im = a.imshow(img.reshape(shape), cmap="RdBu_r", vmin=-lim, vmax=lim,
-                          origin="upper")
+            im = a.imshow(
+                img.reshape(shape), cmap="RdBu_r", vmin=-lim, vmax=lim, origin="upper"
+            )
             a.set_title(f"{b.recording}: residual {lab} [nm]")
             fig.colorbar(im, ax=a, shrink=0.8)
         return save(fig, path)
     fig, ax = figure(figsize=(9, 3.5))
-    s_nom = (nominal or b)
-    for vals, blk, lab, c in ((before, s_nom, "before", "C0"), (after, b, "after", "C3")):
+    s_nom = nominal or b
+    for vals, blk, lab, c in (
+        (before, s_nom, "before", "C0"),
+        (after, b, "after", "C3"),
+    ):
         pos = blk.along[blk.keep] if blk.along is not None else np.arange(vals.size)
         ax.plot(pos * 1e3, vals * 1e9, ".", ms=1, color=c, label=lab)
     ax.set_xlabel("position along the profile [mm]")
@@ -171,8 +198,9 @@ def figures(d, out: Path) -> dict[str, Path]:
         if isinstance(b, SpectralBlock):
             res[f"{name}_spectrum"] = _spectrum(b, d, out / f"{name}_spectrum.png")
         elif isinstance(b, TimeBlock):
-            res[f"{name}_residual"] = _timeseries(b, d, forces.get(b.recording),
-                                                  out / f"{name}_residual.png")
+            res[f"{name}_residual"] = _timeseries(
+                b, d, forces.get(b.recording), out / f"{name}_residual.png"
+            )
         elif isinstance(b, FRFBlock):
             res[f"{name}_frf"] = _frf(b, d, out / f"{name}_frf.png")
         elif isinstance(b, PointsBlock):
@@ -195,21 +223,29 @@ def fitted_machine_toml(d) -> str:
     p = d.params
     m = case.machine_for(p)
     pidf = case.pidf
-    c = dataclasses.replace(m.controller, kp=pidf.kp, ki=pidf.ki, kd=pidf.kd,
-                            tf=pidf.tf)
+    c = dataclasses.replace(
+        m.controller, kp=pidf.kp, ki=pidf.ki, kd=pidf.kd, tf=pidf.tf
+    )
     m = dataclasses.replace(m, controller=c)
     if math.isfinite(p.max_current):
-        m = dataclasses.replace(m, actuator=dataclasses.replace(
-            m.actuator, max_current=float(p.max_current)))
+        m = dataclasses.replace(
+            m,
+            actuator=dataclasses.replace(m.actuator, max_current=float(p.max_current)),
+        )
     if p.sensor_floor is not None or p.sensor_corner is not None:
         sn = m.disturbances.sensor_noise
         sn = dataclasses.replace(
-            sn, floor=sn.floor if p.sensor_floor is None else float(p.sensor_floor),
-            corner=sn.corner if p.sensor_corner is None else float(p.sensor_corner))
-        m = dataclasses.replace(m, disturbances=dataclasses.replace(
-            m.disturbances, sensor_noise=sn))
-    lines = [f"fitted by servosurf diagnose to {d.manifest.path if d.manifest else ''}",
-             f"verdict: {d.verdict}"]
+            sn,
+            floor=sn.floor if p.sensor_floor is None else float(p.sensor_floor),
+            corner=sn.corner if p.sensor_corner is None else float(p.sensor_corner),
+        )
+        m = dataclasses.replace(
+            m, disturbances=dataclasses.replace(m.disturbances, sensor_noise=sn)
+        )
+    lines = [
+        f"fitted by servosurf diagnose to {d.manifest.path if d.manifest else ''}",
+        f"verdict: {d.verdict}",
+    ]
     for e in d.explanations + d.recalibration:
         pars = ", ".join(f"{k} = {v:.6g}" for k, v in e["parameters"].items())
         lines.append(f"{e['effect']}: {pars}")
@@ -232,5 +268,7 @@ def fitted_effects_toml(d) -> str:
             elif isinstance(v, float) and not math.isfinite(v):
                 continue
             out[key] = v
-    return dump_toml({"effects": out}, header="fitted effect knobs (SI units), "
-                     "see servosurf.diagnose.ModelParams")
+    return dump_toml(
+        {"effects": out},
+        header="fitted effect knobs (SI units), see servosurf.diagnose.ModelParams",
+    )

@@ -80,8 +80,7 @@ class Engine:
         by ``p`` (new lines, modes and orders after a term is accepted).
     """
 
-    def __init__(self, blocks, loc: Locations, effects, rebuild,
-                 relocate=None) -> None:
+    def __init__(self, blocks, loc: Locations, effects, rebuild, relocate=None) -> None:
         self.blocks = list(blocks)
         self.loc = loc
         self.effects = list(effects)
@@ -152,8 +151,11 @@ class Engine:
 
     def penalty(self, eff: Effect, n_configs: int, cfg: Config | None = None) -> float:
         """Score penalty of one term of ``eff`` with ``n_configs`` configurations."""
-        pen = eff.n_params(cfg) * math.log(max(self.n_total, 2)) \
-            + 2.0 * math.log(max(n_configs, 1)) + SCORE_CONSTANT
+        pen = (
+            eff.n_params(cfg) * math.log(max(self.n_total, 2))
+            + 2.0 * math.log(max(n_configs, 1))
+            + SCORE_CONSTANT
+        )
         if eff.recalibration:
             pen += RECAL_PENALTY
         return pen
@@ -175,8 +177,11 @@ class Engine:
             for cfg in cfgs:
                 cols = self._templates(eff, p, cfg, base)
                 lam, coefs = self._project(cols, base)
-                out.append(Candidate(eff, cfg, lam,
-                                     lam - self.penalty(eff, len(cfgs), cfg), coefs))
+                out.append(
+                    Candidate(
+                        eff, cfg, lam, lam - self.penalty(eff, len(cfgs), cfg), coefs
+                    )
+                )
         out.sort(key=lambda c: -c.score)
         return out
 
@@ -187,8 +192,14 @@ class Engine:
             frees += t.effect.free(p, t.slot, self.loc, t.config)
         return frees
 
-    def fit(self, p: ModelParams, terms: list[Term], *, max_nfev: int = 60,
-            only_last: bool = False) -> ModelParams:
+    def fit(
+        self,
+        p: ModelParams,
+        terms: list[Term],
+        *,
+        max_nfev: int = 60,
+        only_last: bool = False,
+    ) -> ModelParams:
         """Nonlinear least squares of the exact deviance over the terms' parameters.
 
         Parameters
@@ -226,8 +237,12 @@ class Engine:
         lo = np.array([math.log(f.lo) if f.log else f.lo for f in frees])
         hi = np.array([math.log(f.hi) if f.log else f.hi for f in frees])
         x0 = np.clip(to_x(p), lo + 1e-12 * (hi - lo), hi - 1e-12 * (hi - lo))
-        scale = np.array([1.0 if f.log else max(abs(v), 1e-3 * (f.hi - f.lo) / 1e3)
-                          for f, v in zip(frees, x0, strict=True)])
+        scale = np.array(
+            [
+                1.0 if f.log else max(abs(v), 1e-3 * (f.hi - f.lo) / 1e3)
+                for f, v in zip(frees, x0, strict=True)
+            ]
+        )
 
         def fun(z):
             q = from_x(x0 + z * scale)
@@ -236,9 +251,16 @@ class Engine:
         d0 = self.deviance(from_x(x0))
         try:
             sol = sp.optimize.least_squares(
-                fun, np.zeros(x0.size), bounds=((lo - x0) / scale, (hi - x0) / scale),
-                method="trf", x_scale="jac", diff_step=1e-4, max_nfev=max_nfev,
-                xtol=1e-5, ftol=1e-6)
+                fun,
+                np.zeros(x0.size),
+                bounds=((lo - x0) / scale, (hi - x0) / scale),
+                method="trf",
+                x_scale="jac",
+                diff_step=1e-4,
+                max_nfev=max_nfev,
+                xtol=1e-5,
+                ftol=1e-6,
+            )
             q = from_x(x0 + sol.x * scale)
             if self.deviance(q) <= d0:
                 return q
@@ -272,12 +294,25 @@ class Engine:
             t[i] = float(f)
             return p.replace(line_frequencies=tuple(t))
 
-        time_blocks = [k for k, b in enumerate(self.blocks) if hasattr(b, "records")
-                       or b.domain == "spectrum"]
-        all_blocks = list(range(len(self.blocks)))
-
         def dev(q, which):
-            return sum(float(r @ r) for r in (self.block_residual(k, q) for k in which))
+            tot = 0.0
+            for k in which:
+                b = self.blocks[k]
+                r = b.residual(q) if "lines" in b.tags else self.block_residual(k, q)
+                tot += float(r @ r)
+            return tot
+
+        best = self._scan_line(p, f0, df, with_f, dev)
+        q = with_f(best)
+        return q if self.deviance(q) <= self.deviance(p) else p
+
+    def _scan_line(self, p, f0, df, with_f, dev) -> float:
+        time_blocks = [
+            k
+            for k, b in enumerate(self.blocks)
+            if hasattr(b, "records") or b.domain == "spectrum"
+        ]
+        all_blocks = list(range(len(self.blocks)))
 
         spans = [self._span(self.blocks[k]) for k in time_blocks]
         t1 = max([s for s in spans if s > 0] or [1.0 / df])
@@ -285,11 +320,46 @@ class Engine:
         best = min(grid, key=lambda f: dev(with_f(f), time_blocks))
         t2 = max([self._span(b) for b in self.blocks] + [t1])
         if t2 > 1.5 * t1:
-            fine = np.arange(best - 1.0 / (4 * t1), best + 1.0 / (4 * t1),
-                             1.0 / (8 * t2))
-            best = min(fine, key=lambda f: dev(with_f(f), all_blocks))
-        q = with_f(best)
-        return q if self.deviance(q) <= self.deviance(p) else p
+            # maps and profiles see the tool only while it cuts (a gate at the FTS
+            # frequency): a line and its gate sidebands f +- k f_FTS compete, so
+            # every alias is refined and the best kept
+            centres = (
+                [best + k * self.loc.fts for k in (-1, 0, 1)]
+                if self.loc.fts > 0
+                else [best]
+            )
+            cands = []
+            for c in centres:
+                if c <= 1.0:
+                    continue
+                fine = np.arange(c - 1.0 / (6 * t1), c + 1.0 / (6 * t1), 1.0 / (6 * t2))
+                fb = min(fine, key=lambda f: dev(with_f(f), all_blocks))
+                cands.append((dev(with_f(fb), all_blocks), fb))
+            best = min(cands)[1]
+        return float(best)
+
+    @staticmethod
+    def _distinct(c: Candidate, prev: list) -> bool:
+        """A second start of a module must differ (a mode 10 % away in frequency)."""
+        f = c.config.values.get("f")
+        if f is None:
+            return False
+        return all(abs(math.log(f / q.config.values.get("f", f))) > 0.1 for q in prev)
+
+    def _channel_ok(self, eff: Effect, q: ModelParams, term: Term) -> bool:
+        """Channel logic: the term must show where its physics says it must."""
+        if eff.require is None:
+            return True
+        dom, dmin = eff.require
+        idx = [i for i, b in enumerate(self.blocks) if b.domain == dom]
+        if not idx:
+            return True
+        without = eff.remove(q, term.slot)
+
+        def dev(m):
+            return sum(float(r @ r) for r in (self.block_residual(i, m) for i in idx))
+
+        return dev(without) - dev(q) >= dmin
 
     def line_search_1d(self, p: ModelParams, term: Term) -> ModelParams:
         """Golden-section search on a single (log) parameter: thresholded modules."""
@@ -299,12 +369,14 @@ class Engine:
 
         def d(x):
             return self.deviance(f.set(p, math.exp(x)))
+
         grid = np.linspace(a, b, 9)
         vals = [d(x) for x in grid]
         k = int(np.argmin(vals))
         lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        res = sp.optimize.minimize_scalar(d, bounds=(lo, hi), method="bounded",
-                                          options={"xatol": 1e-4})
+        res = sp.optimize.minimize_scalar(
+            d, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4}
+        )
         best = res.x if res.fun <= vals[k] else grid[k]
         return f.set(p, math.exp(best))
 
@@ -328,26 +400,48 @@ class Engine:
             d_cur = self.deviance(p)
             cands = self.screen(p, terms)
             if progress:
-                progress(f"ranked {len(cands)} configurations; leader "
-                         + (f"{cands[0].effect.name} [{cands[0].config.label}] score "
-                            f"{cands[0].score:.1f}" if cands else "none"))
+                progress(
+                    f"ranked {len(cands)} configurations; leader "
+                    + (
+                        f"{cands[0].effect.name} [{cands[0].config.label}] score "
+                        f"{cands[0].score:.1f}"
+                        if cands
+                        else "none"
+                    )
+                )
             if ranking is None:
                 ranking = cands
-            self.log.append({"deviance": d_cur, "top": [
-                (c.effect.name, c.config.label, round(c.lam, 1), round(c.score, 1))
-                for c in cands[:8]]})
+            self.log.append(
+                {
+                    "deviance": d_cur,
+                    "top": [
+                        (
+                            c.effect.name,
+                            c.config.label,
+                            round(c.lam, 1),
+                            round(c.score, 1),
+                        )
+                        for c in cands[:8]
+                    ],
+                }
+            )
             tried = []
-            seen = set()
+            seen: dict[str, list] = {}
             top = cands[0].score if cands else 0.0
             for c in cands:
-                if len(tried) >= n_fit:
+                if len({t.effect.name for t in tried}) >= n_fit:
                     break
-                if c.effect.name in seen:
+                prev = seen.get(c.effect.name, [])
+                if len(prev) >= c.effect.n_start:
+                    continue
+                if prev and not self._distinct(c, prev):
                     continue
                 # fit the best few, skipping those far behind the leader
-                if c.score <= MIN_LINEAR_SCORE or (top > 0 and c.score < FIT_SHARE * top):
+                if c.score <= MIN_LINEAR_SCORE or (
+                    top > 0 and c.score < FIT_SHARE * top
+                ):
                     continue
-                seen.add(c.effect.name)
+                seen.setdefault(c.effect.name, []).append(c)
                 tried.append(c)
             best = None
             for c in tried:
@@ -364,9 +458,13 @@ class Engine:
                 lam = d_cur - self.deviance(q)
                 n_cfg = max(len(c.effect.configs(self.loc, p)), 1)
                 score = lam - self.penalty(c.effect, n_cfg, c.config)
+                if not self._channel_ok(c.effect, q, tnew):
+                    score = -math.inf
                 if progress:
-                    progress(f"{c.effect.name} [{c.config.label}]: dD {lam:.1f}, "
-                             f"score {score:.1f}")
+                    progress(
+                        f"{c.effect.name} [{c.config.label}]: dD {lam:.1f}, "
+                        f"score {score:.1f}"
+                    )
                 if best is None or score > best[0]:
                     best = (score, q, tnew, lam)
             if best is None or best[0] <= 0:
@@ -395,14 +493,18 @@ class Engine:
             worst = None
             for j, t in enumerate(terms):
                 q = t.effect.remove(p, t.slot)
-                rest = [u if u.effect is not t.effect or u.slot < t.slot
-                        else Term(u.effect, u.slot - 1, u.config, u.delta_deviance,
-                                  u.score)
-                        for k, u in enumerate(terms) if k != j]
+                rest = [
+                    u
+                    if u.effect is not t.effect or u.slot < t.slot
+                    else Term(u.effect, u.slot - 1, u.config, u.delta_deviance, u.score)
+                    for k, u in enumerate(terms)
+                    if k != j
+                ]
                 q = self.fit(q, rest, max_nfev=30)
                 n_cfg = max(len(t.effect.configs(self.loc, q)), 1)
-                score = (self.deviance(q) - d_full) - self.penalty(t.effect, n_cfg,
-                                                                   t.config)
+                score = (self.deviance(q) - d_full) - self.penalty(
+                    t.effect, n_cfg, t.config
+                )
                 if worst is None or score < worst[0]:
                     worst = (score, q, rest, t)
             if worst is not None and worst[0] < 0:

@@ -123,10 +123,19 @@ class ModelParams:
     # keys selecting cached discrete models
     def linear_key(self) -> tuple:
         """Knobs that change the linear loop (delay, mode, recalibration)."""
-        mode = (self.mode_frequency, self.mode_damping, self.mode_gain) \
-            if self.mode_gain != 0.0 and self.mode_frequency > 0 else ()
-        return (self.extra_delay, mode, self.moving_mass, self.flexure_stiffness,
-                self.flexure_damping, self.force_constant)
+        mode = (
+            (self.mode_frequency, self.mode_damping, self.mode_gain)
+            if self.mode_gain != 0.0 and self.mode_frequency > 0
+            else ()
+        )
+        return (
+            self.extra_delay,
+            mode,
+            self.moving_mass,
+            self.flexure_stiffness,
+            self.flexure_damping,
+            self.force_constant,
+        )
 
     def key(self, tags: tuple[str, ...]) -> tuple:
         """Values of the knob groups ``tags`` (for caching what depends on them).
@@ -145,15 +154,30 @@ class ModelParams:
             elif t == "sensor_noise":
                 out.append((self.sensor_floor, self.sensor_corner))
             elif t == "nonlin":
-                out.append((self.max_current, self.kf_b1, self.kf_b2, self.flexure_k2,
-                            self.flexure_k3))
+                out.append(
+                    (
+                        self.max_current,
+                        self.kf_b1,
+                        self.kf_b2,
+                        self.flexure_k2,
+                        self.flexure_k3,
+                    )
+                )
             elif t == "force":
                 out.append(self.specific_force)
             elif t == "path":
-                out.append((self.sensor_a2, self.sensor_a3, self.drift_amplitude,
-                            self.drift_time_constant, self.drift_rate,
-                            self.spindle_orders, self.spindle_amplitudes,
-                            self.spindle_phases))
+                out.append(
+                    (
+                        self.sensor_a2,
+                        self.sensor_a3,
+                        self.drift_amplitude,
+                        self.drift_time_constant,
+                        self.drift_rate,
+                        self.spindle_orders,
+                        self.spindle_amplitudes,
+                        self.spindle_phases,
+                    )
+                )
             elif t == "tool":
                 out.append((self.waviness, self.radius_error, self.recovery))
             else:
@@ -188,8 +212,9 @@ class CaseModel:
         (:class:`servosurf.cutting.Material`).
     """
 
-    def __init__(self, machine: Machine, toolpath=None, *,
-                 specific_force: float | None = None) -> None:
+    def __init__(
+        self, machine: Machine, toolpath=None, *, specific_force: float | None = None
+    ) -> None:
         if specific_force is None:
             from ..cutting import load_workpiece
 
@@ -235,8 +260,11 @@ class CaseModel:
 
     def tool_radius(self) -> float:
         """Nose radius of the case's tool in m (0.5 mm without a toolpath)."""
-        return float(self.toolpath.tool.nose_radius) if self.toolpath is not None \
+        return (
+            float(self.toolpath.tool.nose_radius)
+            if self.toolpath is not None
             else 0.5e-3
+        )
 
     # ------------------------------------------------------------ frequency
     def paths(self, p: ModelParams, freq: np.ndarray) -> dict:
@@ -279,9 +307,11 @@ class CaseModel:
         out[("reference", "tool")] = gxu * k / one
         out[("sensor_noise", "fe")] = -1.0 / one
         out[("sensor_noise", "tool")] = -gxu * k / one
-        dist = {"current_noise": (bl * pa1, bl * pam * sens),
-                "base": (pl["base"][:, 0], pl["base"][:, sd] * sens),
-                "force": (pl["tool_force"][:, 0], pl["tool_force"][:, sd] * sens)}
+        dist = {
+            "current_noise": (bl * pa1, bl * pam * sens),
+            "base": (pl["base"][:, 0], pl["base"][:, sd] * sens),
+            "force": (pl["tool_force"][:, 0], pl["tool_force"][:, sd] * sens),
+        }
         for name, (gx, gy) in dist.items():
             out[(name, "fe")] = -gy / one
             out[(name, "sensor")] = gy / one
@@ -301,12 +331,19 @@ class CaseModel:
             kw["corner"] = float(p.sensor_corner)
         if kw:
             sn = dataclasses.replace(sn, **kw)
-        return {"sensor_noise": evaluate_psd(sn, freq),
-                "current_noise": evaluate_psd(d.current_noise, freq),
-                "base": evaluate_psd(d.base_vibration, freq)}
+        return {
+            "sensor_noise": evaluate_psd(sn, freq),
+            "current_noise": evaluate_psd(d.current_noise, freq),
+            "base": evaluate_psd(d.base_vibration, freq),
+        }
 
-    def noise_psd(self, p: ModelParams, freq: np.ndarray, output: str = "fe",
-                  paths: dict | None = None) -> np.ndarray:
+    def noise_psd(
+        self,
+        p: ModelParams,
+        freq: np.ndarray,
+        output: str = "fe",
+        paths: dict | None = None,
+    ) -> np.ndarray:
         """One-sided PSD (m^2/Hz) of the stochastic part of ``output`` at ``freq``.
 
         ``output`` is ``"fe"`` (following error) or ``"tool"`` (real tool error).
@@ -342,20 +379,20 @@ class CaseModel:
         cx = np.zeros((5, n))
         cx[0, :n0] = c[0]
         cx[1, :n0] = c[1]
-        cx[2, 0] = 1.0      # coil current I (amplifier state)
-        cx[3, 3] = 1.0      # x2
-        cx[4, 4] = 1.0      # x3
+        cx[2, 0] = 1.0  # coil current I (amplifier state)
+        cx[3, 3] = 1.0  # x2
+        cx[4, 4] = 1.0  # x3
         if nm:
             wr = 2 * np.pi * p.mode_frequency
             bl = m.actuator.force_constant
             ws = m.sensor.corner
             A[n0, n0 + 1] = 1.0
-            A[n0 + 1, n0] = -wr**2
+            A[n0 + 1, n0] = -(wr**2)
             A[n0 + 1, n0 + 1] = -2 * p.mode_damping * wr
             A[n0 + 1, 0] = wr**2 * p.mode_gain * bl
             B[n0 + 1, 1] = wr**2 * p.mode_gain * bl
-            A[11, n0] += ws**2          # sensor filter sees q
-            cx[0, n0] = 1.0             # tool sees q
+            A[11, n0] += ws**2  # sensor filter sees q
+            cx[0, n0] = 1.0  # tool sees q
         t = 1.0 / self.fs
         big = np.zeros((n + 3, n + 3))
         big[:n, :n] = A * t
@@ -364,8 +401,13 @@ class CaseModel:
         ad, bd = e[:n, :n].copy(), e[:n, n:].copy()
         d = m.controller.delay
         nd = int(math.floor(d))
-        out = (np.ascontiguousarray(ad), np.ascontiguousarray(bd),
-               np.ascontiguousarray(cx), nd, float(d - nd))
+        out = (
+            np.ascontiguousarray(ad),
+            np.ascontiguousarray(bd),
+            np.ascontiguousarray(cx),
+            nd,
+            float(d - nd),
+        )
         self._trim()
         self._cache[key] = out
         return out
@@ -375,14 +417,19 @@ class CaseModel:
         key = ("ctrl",)
         if key not in self._cache:
             ac, bc, cc, dc = self.pidf.discrete_ss()
-            self._cache[key] = (np.ascontiguousarray(ac), np.ascontiguousarray(bc),
-                                np.ascontiguousarray(cc.ravel()), float(dc.ravel()[0]))
+            self._cache[key] = (
+                np.ascontiguousarray(ac),
+                np.ascontiguousarray(bc),
+                np.ascontiguousarray(cc.ravel()),
+                float(dc.ravel()[0]),
+            )
         return self._cache[key]
 
     def kt(self, p: ModelParams) -> float:
         """Specific thrust pressure under ``p`` in N/m^2."""
-        return self.specific_force if p.specific_force is None else float(
-            p.specific_force)
+        return (
+            self.specific_force if p.specific_force is None else float(p.specific_force)
+        )
 
     def chip_args(self, p: ModelParams) -> tuple[float, float, float, float]:
         """``(k_t, radius, top, area)`` of the lenslet chip force (plunge model)."""
@@ -399,8 +446,9 @@ class CaseModel:
         path = self.toolpath.path
         key = ("facing_area",)
         if key not in self._cache:
-            self._cache[key] = facing_chip_area(self.tool_radius(), path.feed_per_rev,
-                                                path.depth_of_cut)
+            self._cache[key] = facing_chip_area(
+                self.tool_radius(), path.feed_per_rev, path.depth_of_cut
+            )
         ramp = np.clip((t - t[0]) * path.rev_per_s, 0.0, 1.0)
         return self.kt(p) * self._cache[key] * ramp
 
@@ -416,10 +464,16 @@ class CaseModel:
             return self.simulate(p, reference=ref, force=self.facing_force(p, t))
         return self.simulate(p, reference=ref, chip=True)
 
-    def simulate(self, p: ModelParams, *, reference: np.ndarray,
-                 force: np.ndarray | None = None, chip: bool = False,
-                 current_noise: np.ndarray | None = None,
-                 sensor_noise: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def simulate(
+        self,
+        p: ModelParams,
+        *,
+        reference: np.ndarray,
+        force: np.ndarray | None = None,
+        chip: bool = False,
+        current_noise: np.ndarray | None = None,
+        sensor_noise: np.ndarray | None = None,
+    ) -> dict[str, np.ndarray]:
         """Simulate the loop sample by sample under ``p``.
 
         Parameters
@@ -459,12 +513,42 @@ class CaseModel:
         umax = p.max_current / m.actuator.current_gain if sat else 0.0
         out = np.zeros((6, n))
         with np.errstate(all="ignore"):
-            _nl_loop(ad, bd, cx, ac, bc, cc, dc, m.sensor.sensitivity, nd, frac, r,
-                     prep(force), prep(current_noise), prep(sensor_noise), kt, radius,
-                     top, area, umax, p.kf_b1, p.kf_b2, p.flexure_k2, p.flexure_k3,
-                     m.actuator.force_constant, 1 if sat else 0, out)
-        return {"tool": out[0], "sensor": out[1], "fe": out[2], "u": out[3],
-                "force": out[4], "current": out[5]}
+            _nl_loop(
+                ad,
+                bd,
+                cx,
+                ac,
+                bc,
+                cc,
+                dc,
+                m.sensor.sensitivity,
+                nd,
+                frac,
+                r,
+                prep(force),
+                prep(current_noise),
+                prep(sensor_noise),
+                kt,
+                radius,
+                top,
+                area,
+                umax,
+                p.kf_b1,
+                p.kf_b2,
+                p.flexure_k2,
+                p.flexure_k3,
+                m.actuator.force_constant,
+                1 if sat else 0,
+                out,
+            )
+        return {
+            "tool": out[0],
+            "sensor": out[1],
+            "fe": out[2],
+            "u": out[3],
+            "force": out[4],
+            "current": out[5],
+        }
 
     # ------------------------------------------------------------ stability
     def is_stable(self, p: ModelParams) -> bool:
@@ -477,19 +561,19 @@ class CaseModel:
         n = na + nc + nb
         a = np.zeros((n, n))
         e_row = -s * cx[1]
-        a[na:na + nc, :na] = np.outer(bc[:, 0], e_row)
-        a[na:na + nc, na:na + nc] = ac
+        a[na : na + nc, :na] = np.outer(bc[:, 0], e_row)
+        a[na : na + nc, na : na + nc] = ac
         u_row_a = dc * e_row
         o = na + nc
         a[o, :na] = u_row_a
-        a[o, na:na + nc] = cc
+        a[o, na : na + nc] = cc
         for j in range(1, nb):
             a[o + j, o + j - 1] = 1.0
 
         def add_applied(col: int, weight: float) -> None:
             if col == 0:
                 a[:na, :na] += weight * np.outer(bd[:, 0], u_row_a)
-                a[:na, na:na + nc] += weight * np.outer(bd[:, 0], cc)
+                a[:na, na : na + nc] += weight * np.outer(bd[:, 0], cc)
             else:
                 a[:na, o + col - 1] += weight * bd[:, 0]
 

@@ -27,8 +27,14 @@ import numpy as np
 
 from ._sim import CaseModel, ModelParams
 
-__all__ = ["PointSet", "ToolTrajectory", "tool_trajectory", "surface_heights",
-           "legendre_waviness", "path_terms"]
+__all__ = [
+    "PointSet",
+    "ToolTrajectory",
+    "tool_trajectory",
+    "surface_heights",
+    "legendre_waviness",
+    "path_terms",
+]
 
 
 class PointSet:
@@ -63,9 +69,9 @@ class PointSet:
             n_rev = math.floor(path.duration / t_rev)
             j = np.clip(j, 0, n_rev)
             t = phase[:, None] + j * t_rev
-        self.t = t                                   # (n, passes) s
+        self.t = t  # (n, passes) s
         self.dr = self.r[:, None] - path.radius_at(t)  # (n, passes) m
-        self.theta_pass = path.theta_at(t)          # unwrapped tool angle, rad
+        self.theta_pass = path.theta_at(t)  # unwrapped tool angle, rad
         self.z_cmd = path.z_at(t)
         self.half_width = spec.tool.half_width
         self.radius = spec.tool.nose_radius
@@ -110,8 +116,9 @@ class ToolTrajectory:
         return np.interp(tt, self.t, self.x1)
 
 
-def tool_trajectory(case: CaseModel, p: ModelParams, *, periods: int = 12,
-                    sim: dict | None = None) -> ToolTrajectory:
+def tool_trajectory(
+    case: CaseModel, p: ModelParams, *, periods: int = 12, sim: dict | None = None
+) -> ToolTrajectory:
     """Simulate the cut of the case's toolpath under ``p`` (deterministic part).
 
     Parameters
@@ -137,8 +144,18 @@ def tool_trajectory(case: CaseModel, p: ModelParams, *, periods: int = 12,
         period = 1.0 / spec.path.frequency
     else:
         period = 0.01
-    n = int(round(min(periods * period if spec.kind == "lenslet" else 0.12,
-                      spec.path.duration) * fs)) + 2
+    n = (
+        int(
+            round(
+                min(
+                    periods * period if spec.kind == "lenslet" else 0.12,
+                    spec.path.duration,
+                )
+                * fs
+            )
+        )
+        + 2
+    )
     if sim is not None and sim["tool"].size >= n:
         x1 = sim["tool"]
     else:
@@ -159,8 +176,13 @@ def legendre_waviness(phi: np.ndarray, coefs, phi_ref: float) -> np.ndarray:
     return np.polynomial.legendre.legval(u, c)
 
 
-def path_terms(case: CaseModel, p: ModelParams, t: np.ndarray, theta: np.ndarray,
-               z_tool: np.ndarray) -> np.ndarray:
+def path_terms(
+    case: CaseModel,
+    p: ModelParams,
+    t: np.ndarray,
+    theta: np.ndarray,
+    z_tool: np.ndarray,
+) -> np.ndarray:
     """Outside-the-loop tool-height terms in m.
 
     Sensor nonlinearity ``-a2 z^2 - a3 z^3`` (the loop makes the *reading* follow
@@ -175,8 +197,9 @@ def path_terms(case: CaseModel, p: ModelParams, t: np.ndarray, theta: np.ndarray
         dz += p.drift_amplitude * -np.expm1(-t / max(p.drift_time_constant, 1e-9))
     if p.drift_rate:
         dz += p.drift_rate * t
-    for h, a, ph in zip(p.spindle_orders, p.spindle_amplitudes, p.spindle_phases,
-                        strict=True):
+    for h, a, ph in zip(
+        p.spindle_orders, p.spindle_amplitudes, p.spindle_phases, strict=True
+    ):
         dz += a * np.cos(h * theta + ph)
     return dz
 
@@ -185,15 +208,23 @@ def phi_reference(case: CaseModel) -> float:
     """Contact angle (rad) spanned by the cut: the waviness basis runs over it."""
     spec = case.toolpath
     r = spec.tool.nose_radius
-    depth = spec.path.depth_of_cut if spec.kind == "lenslet" else \
-        spec.path.feed_per_rev * 4
+    depth = (
+        spec.path.depth_of_cut if spec.kind == "lenslet" else spec.path.feed_per_rev * 4
+    )
     half = min(math.sqrt(max(2 * r * depth - depth * depth, 0.0)), spec.tool.half_width)
     return max(math.asin(min(half / r, 1.0)), 1e-6)
 
 
-def surface_heights(case: CaseModel, pts: PointSet, p: ModelParams,
-                    traj: ToolTrajectory, *, noise=None, top: float = 0.0,
-                    return_pass: bool = False):
+def surface_heights(
+    case: CaseModel,
+    pts: PointSet,
+    p: ModelParams,
+    traj: ToolTrajectory,
+    *,
+    noise=None,
+    top: float = 0.0,
+    return_pass: bool = False,
+):
     """Heights in m of the surface at the points under ``p``.
 
     Parameters
@@ -232,8 +263,9 @@ def surface_heights(case: CaseModel, pts: PointSet, p: ModelParams,
         arc = R - np.sqrt(np.maximum(R * R - dr * dr, 0.0))
         if len(p.waviness):
             phi = np.arcsin(np.clip(dr / pts.radius, -1.0, 1.0))
-            arc = arc - legendre_waviness(phi, p.waviness, phi_reference(case)) \
-                / np.cos(phi)
+            arc = arc - legendre_waviness(
+                phi, p.waviness, phi_reference(case)
+            ) / np.cos(phi)
     h = np.full(pts.t.shape, np.inf)
     h.ravel()[pts.flat] = zt + arc
     k = np.argmin(h, axis=1)

@@ -22,8 +22,9 @@ def _openblas_handles():
     out = []
     try:
         with open("/proc/self/maps") as fh:
-            paths = {ln.split()[-1] for ln in fh
-                     if "openblas" in ln.lower() and ".so" in ln}
+            paths = {
+                ln.split()[-1] for ln in fh if "openblas" in ln.lower() and ".so" in ln
+            }
     except OSError:
         return out
     for path in sorted(paths):
