@@ -6,37 +6,14 @@ outputs. Kernels take contiguous float64 arrays and scalars only.
 
 from __future__ import annotations
 
-import math
-import os
-
 import numpy as np
 from numba import njit
 
+from ..kernels._config import CACHE as _CACHE
+from ..kernels._config import FASTMATH as _FASTMATH
+from ..kernels._lti import _segment_area  # the chip section, shared
+
 __all__ = ["_nl_loop", "_segment_area"]
-
-_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
-_CACHE = os.environ.get("SERVOSURF_NUMBA_CACHE", "1").strip().lower() not in (
-    "0",
-    "false",
-    "off",
-    "no",
-)
-
-
-@njit(cache=_CACHE, fastmath=_FASTMATH)
-def _segment_area(radius, depth):
-    """Area (m^2) of a circle of ``radius`` (m) below a chord at ``depth`` (m).
-
-    The uncut chip section of a round-nose tool plunged ``depth`` into a flat face.
-    """
-    if depth <= 0.0:
-        return 0.0
-    if depth >= radius:
-        depth = radius
-    h = radius - depth
-    return radius * radius * math.acos(h / radius) - h * math.sqrt(
-        max(2.0 * radius * depth - depth * depth, 0.0)
-    )
 
 
 @njit(cache=_CACHE, fastmath=_FASTMATH)

@@ -5,9 +5,12 @@ DISCOVERY.md section 5.2, steps 3 to 5:
 * **templates**: for every module configuration, the change of every block's
   whitened residual when the module is switched on at a probe value;
 * **rank**: the linearised deviance reduction ``Lambda`` of projecting the current
-  residual on the configuration's templates, scored
-  ``Lambda - q ln n - 2 ln(M) - C`` (q parameters, n observations, M
-  configurations of the module, C = 6);
+  residual on the configuration's templates, scored ``Lambda - P - C`` with the
+  penalty ``P`` the smaller of BIC's ``q ln n + 2 ln M`` (q parameters, n
+  observations, M configurations of the module) and the chi2(q) likelihood-ratio
+  threshold at a false-alarm rate of 1e-3 shared by every configuration of every
+  module (Bonferroni), and C = 6; both guard against over-fitting, the second
+  with a stated false-alarm rate (BIC's ``ln n`` grows with the record length);
 * **fit**: the best few are fitted by nonlinear least squares of the exact
   deviance *together with every term already accepted* (relinearisation), in log
   space for positive parameters, with columns scaled by the solver;
@@ -31,6 +34,8 @@ __all__ = ["Engine", "Term", "Candidate"]
 
 #: Constant of the selection score (DISCOVERY.md: -6).
 SCORE_CONSTANT = 6.0
+#: False-alarm rate of the likelihood-ratio threshold over the whole catalogue.
+FAMILY_ALPHA = 1e-3
 #: Extra penalty of recalibration terms (they must clearly beat physics).
 RECAL_PENALTY = 20.0
 #: Candidates whose linear score is below this share of the leader's are not fitted.
@@ -151,11 +156,13 @@ class Engine:
 
     def penalty(self, eff: Effect, n_configs: int, cfg: Config | None = None) -> float:
         """Score penalty of one term of ``eff`` with ``n_configs`` configurations."""
-        pen = (
-            eff.n_params(cfg) * math.log(max(self.n_total, 2))
-            + 2.0 * math.log(max(n_configs, 1))
-            + SCORE_CONSTANT
-        )
+        q = eff.n_params(cfg)
+        bic = q * math.log(max(self.n_total, 2)) + 2.0 * math.log(max(n_configs, 1))
+        # likelihood-ratio threshold with a stated false-alarm rate: Bonferroni over
+        # the modules and the module's configurations
+        n_mod = max(len(self.effects), 1)
+        lr = float(sp.stats.chi2.isf(FAMILY_ALPHA / (n_mod * max(n_configs, 1)), q))
+        pen = min(bic, lr) + SCORE_CONSTANT
         if eff.recalibration:
             pen += RECAL_PENALTY
         return pen
