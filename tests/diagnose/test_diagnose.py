@@ -286,3 +286,28 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
     assert any("frf" in p.name for p in pngs) and any("map" in p.name for p in pngs)
     for p in pngs:
         assert p.read_bytes()[:8] == PNG
+
+
+# ------------------------------------------------------------------ surface model
+def test_pointwise_surface_matches_the_sweep_kernel():
+    """The diagnosis's pointwise surface equals servosurf.toolpath.sweep."""
+    import dataclasses
+
+    from servosurf.diagnose._sim import CaseModel, ModelParams
+    from servosurf.diagnose._surface import PointSet, surface_heights, tool_trajectory
+    from servosurf.servo import load_machine
+    from servosurf.toolpath import load_toolpath, sample, sweep
+
+    spec = load_toolpath(REPO / "toolpaths" / "lenslet_5um.toml")
+    fld = dataclasses.replace(spec.field, nx=120, ny=100)
+    case = CaseModel(load_machine().with_moving_mass(0.175).with_bandwidth(468.0),
+                     spec)
+    traj = tool_trajectory(case, ModelParams())
+    path = sample(spec, field=fld)
+    ref = sweep(path.with_z(traj(path.t)), spec.tool, fld)
+    x, y = fld.coords()
+    xx, yy = np.meshgrid(x, y)
+    z = surface_heights(case, PointSet(case, xx.ravel(), yy.ravel()), ModelParams(),
+                        traj).reshape(xx.shape)
+    assert (z < -1e-6).mean() > 0.2  # the field holds a good part of a lenslet
+    np.testing.assert_allclose(z, ref.z, rtol=0, atol=1e-15)  # 1 fm
