@@ -57,9 +57,14 @@ __all__ = [
     "TH_HI",
     "TH_FIRST",
     "GSCALE",
+    "ANCHOR",
+    "T_SERIES",
     "_bucket_stats",
+    "_crossing",
+    "_row_polar",
     "_sweep_exhaustive",
     "_sweep_pruned",
+    "_walk_pruned",
 ]
 
 TWO_PI = 2.0 * np.pi
@@ -408,44 +413,71 @@ def _start_bucket(rq, bstat, direction, hint):  # pragma: no cover - numba
 
 
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
-def _envelope_pruned(phi, rq, h0, j0, theta, pts, bidx, bstat, theta_ref, radius,
-                     half_width, wav, wav_s0, wav_inv_ds, wav_bound,
-                     slack):  # pragma: no cover - numba
-    """Minimum height over the crossings that can be lowest, in m.
+def _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width, wav,
+              wav_s0, wav_inv_ds):  # pragma: no cover - numba
+    """Edge height over the query point at its crossing of bucket ``j``, in m.
 
     Parameters
     ----------
-    phi, rq, h0 : float
-        Query angle (rad), signed query radius (m) and pre-cut height (m).
-    j0 : int
-        Start bucket (nearest radius).
-    theta, pts, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
-    wav_inv_ds, wav_bound, slack : see :func:`_envelope_exhaustive`.
+    j : int
+        Bucket.
+    phi, rq : float
+        Query angle (rad) and signed query radius (m).
+    m0 : float
+        Revolution number of bucket 0's crossing, ``ceil((theta_ref - phi) / 2 pi)``.
+    theta, pts, bidx, bstat, radius, half_width, wav, wav_s0, wav_inv_ds
+        See :func:`_envelope_exhaustive`.
 
     Returns
     -------
     float
-        The lowest height, in m; equal to :func:`_envelope_exhaustive`'s.
+        Height in m; ``+inf`` when the crossing lies outside the path, in a gap or
+        beyond the arc's reach.
+    """
+    target = phi + TWO_PI * (m0 + j)
+    if target < theta[0] or target > theta[theta.size - 1]:
+        return np.inf
+    i = _locate_guided(theta, pts, target, j, bidx, bstat)
+    return _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0, wav_inv_ds)
+
+
+@njit(cache=CACHE, fastmath=FASTMATH, inline="always")
+def _walk_pruned(phi, m0, rq, best, j0, theta, pts, bidx, bstat, radius, half_width,
+                 wav, wav_s0, wav_inv_ds, wav_bound, slack):  # pragma: no cover - numba
+    """Lower ``best`` by the crossings of the buckets on both sides of ``j0``, in m.
+
+    Parameters
+    ----------
+    phi, m0, rq : float
+        Query angle (rad), revolution number of bucket 0 (see :func:`_crossing`) and
+        signed query radius (m).
+    best : float
+        Running minimum, in m: the pre-cut height lowered by bucket ``j0``'s crossing.
+    j0 : int
+        Start bucket (nearest radius), already evaluated.
+    theta, pts, bidx, bstat, radius, half_width, wav, wav_s0, wav_inv_ds,
+    wav_bound, slack : see :func:`_envelope_exhaustive`.
+
+    Returns
+    -------
+    float
+        The lowest height, in m; with ``j0`` evaluated first, equal to
+        :func:`_envelope_exhaustive`'s.
 
     Notes
     -----
-    Walks from ``j0`` upwards and downwards. Before each bucket, the bound over *all*
-    remaining buckets in that direction (suffix or prefix hull of r, minimum of z) is
-    compared with the running minimum; when it is not lower the walk stops. A bucket
-    is evaluated only if its own bound is lower. Bounds never exceed the true heights,
-    so the skipped crossings cannot change the minimum: the result is the exhaustive
-    kernel's, crossing for crossing.
+    Walks from ``j0 + 1`` upwards and from ``j0 - 1`` downwards. Before each bucket,
+    the bound over *all* remaining buckets in that direction (suffix or prefix hull of
+    r, minimum of z) is compared with the running minimum; when it is not lower the
+    walk stops. A bucket is evaluated only if its own bound is lower. Bounds never
+    exceed the true heights (by more than ``slack``, far above the rounding), so the
+    skipped crossings cannot change the minimum, and evaluating ``j0`` whatever its
+    bound adds only a crossing that cannot be below a bound it does not beat: the
+    result is the exhaustive kernel's, crossing for crossing.
     """
-    n = theta.size
     nb = bidx.shape[0]
-    # Absolute revolution number of bucket 0's crossing: targets phi + 2 pi (m0 + j)
-    # do not depend on theta_ref, so tiles reproduce whole-field runs bit for bit.
-    m0 = np.ceil((theta_ref - phi) / TWO_PI)
     inv2r = 0.5 / radius
-    t_first = theta[0]
-    t_last = theta[n - 1]
-    best = h0
-    j = j0
+    j = j0 + 1
     while j < nb:
         d = max(bstat[j, SUF_RLO] - rq, rq - bstat[j, SUF_RHI], 0.0)
         if d > half_width:
@@ -454,13 +486,10 @@ def _envelope_pruned(phi, rq, h0, j0, theta, pts, bidx, bstat, theta_ref, radius
             break
         d = max(bstat[j, RLO] - rq, rq - bstat[j, RHI], 0.0)
         if d <= half_width and bstat[j, ZLO] + d * d * inv2r - wav_bound - slack < best:
-            target = phi + TWO_PI * (m0 + j)
-            if target >= t_first and target <= t_last:
-                i = _locate_guided(theta, pts, target, j, bidx, bstat)
-                h = _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
-                               wav_inv_ds)
-                if h < best:
-                    best = h
+            h = _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width,
+                          wav, wav_s0, wav_inv_ds)
+            if h < best:
+                best = h
         j += 1
     j = j0 - 1
     while j >= 0:
@@ -471,15 +500,71 @@ def _envelope_pruned(phi, rq, h0, j0, theta, pts, bidx, bstat, theta_ref, radius
             break
         d = max(bstat[j, RLO] - rq, rq - bstat[j, RHI], 0.0)
         if d <= half_width and bstat[j, ZLO] + d * d * inv2r - wav_bound - slack < best:
-            target = phi + TWO_PI * (m0 + j)
-            if target >= t_first and target <= t_last:
-                i = _locate_guided(theta, pts, target, j, bidx, bstat)
-                h = _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
-                               wav_inv_ds)
-                if h < best:
-                    best = h
+            h = _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width,
+                          wav, wav_s0, wav_inv_ds)
+            if h < best:
+                best = h
         j -= 1
     return best
+
+
+#: Columns between exact ``arctan2`` anchors of :func:`_row_polar` (absolute column
+#: numbers, so tiles reproduce whole-field angles bit for bit).
+ANCHOR = 32
+#: Largest tangent of the angle from the anchor for which the series is used.
+T_SERIES = 0.02
+
+
+@njit(cache=CACHE, fastmath=FASTMATH, inline="always")
+def _row_polar(y, x0, dx, col0, rps, phis):  # pragma: no cover - numba
+    """Polar coordinates of one grid row.
+
+    Parameters
+    ----------
+    y : float
+        Row ordinate, in m.
+    x0, dx : float
+        Grid origin and pitch along x, in m.
+    col0 : int
+        Absolute column of ``rps[0]`` in the whole grid.
+    rps, phis : ndarray of shape (nx,)
+        Output: radius (m) and angle ``arctan2(y, x)`` (rad) of every column.
+
+    Notes
+    -----
+    ``arctan2`` is evaluated exactly at anchor columns (every :data:`ANCHOR` absolute
+    columns); in between, phi = phi_a + atan(t) with
+    t = tan(phi - phi_a) = y (x_a - x) / (x_a x + y**2) and the Taylor series of atan
+    to t**9 (truncation below t**11 / 11 = 2e-20 rad for |t| <= :data:`T_SERIES`).
+    Points with a larger |t| (near the spindle axis) get the exact ``arctan2``. The
+    angles agree with ``numpy.arctan2`` to a few ulp, and depend only on the absolute
+    column, so any tiling gives the same bits.
+    """
+    nx = rps.size
+    yy = y * y
+    a = col0 - col0 % ANCHOR  # anchor column of the first point
+    xa = x0 + a * dx
+    pa = np.arctan2(y, xa)
+    k = col0 - a  # position inside the anchor block
+    for col in range(nx):
+        c = col0 + col
+        x = x0 + c * dx
+        rps[col] = np.sqrt(x * x + yy)
+        if k == ANCHOR:
+            k = 0
+            a += ANCHOR
+            xa = x0 + a * dx
+            pa = np.arctan2(y, xa)
+        k += 1
+        den = xa * x + yy
+        num = y * (xa - x)
+        if den > 0.0 and abs(num) <= T_SERIES * den:
+            t = num / den
+            t2 = t * t
+            phis[col] = pa + t * (1.0 - t2 * (1.0 / 3.0 - t2 * (
+                0.2 - t2 * (1.0 / 7.0 - t2 * (1.0 / 9.0)))))
+        else:
+            phis[col] = np.arctan2(y, x)
 
 
 @njit(parallel=True, nogil=True, cache=CACHE, fastmath=FASTMATH)
@@ -532,13 +617,15 @@ def _sweep_exhaustive(theta, pts, bidx, bstat, theta_ref, radius, half_width,
     ny, nx = out.shape
     for row in prange(ny):
         y = y0 + (row0 + row) * dy
+        rps = np.empty(nx)
+        phis = np.empty(nx)
+        _row_polar(y, x0, dx, col0, rps, phis)
         for col in range(nx):
             h0 = out[row, col]
             if np.isnan(h0):
                 continue
-            x = x0 + (col0 + col) * dx
-            rp = np.sqrt(x * x + y * y)
-            phi = np.arctan2(y, x)
+            rp = rps[col]
+            phi = phis[col]
             best = _envelope_exhaustive(phi, rp, h0, theta, pts, bidx, bstat,
                                         theta_ref, radius, half_width, wav, wav_s0,
                                         wav_inv_ds, wav_bound, slack)
@@ -572,28 +659,57 @@ def _sweep_pruned(theta, pts, bidx, bstat, theta_ref, radius, half_width, wav,
     facing at feed f, only the passes within a few f of r_p are evaluated, instead of
     the 2 sqrt(2 R d) / f passes that reach the point at depth of cut d (about 70 at
     2 um/rev, 5 um depth, R = 0.5 mm; seed paper Table 2).
+
+    Each row runs in four stages (polar coordinates, start buckets, the start
+    bucket's crossing, the bounded walk) so that the first three are loops without
+    data-dependent branches between points, which the CPU overlaps; the angles come
+    from :func:`_row_polar` (exact ``arctan2`` every :data:`ANCHOR` columns and a
+    series in between), shared with :func:`_sweep_exhaustive`.
     """
     ny, nx = out.shape
     for row in prange(ny):
         y = y0 + (row0 + row) * dy
+        rps = np.empty(nx)
+        phis = np.empty(nx)
+        m0s = np.empty(nx)
+        j0s = np.empty(nx, dtype=np.int64)
+        # Stage 1: polar coordinates and the revolution number of bucket 0.
+        _row_polar(y, x0, dx, col0, rps, phis)
+        for col in range(nx):
+            m0s[col] = np.ceil((theta_ref - phis[col]) / TWO_PI)
+        # Stage 2: start bucket (nearest mid radius), walking along the row.
         hint = -1
+        for col in range(nx):
+            hint = _start_bucket(rps[col], bstat, direction, hint)
+            j0s[col] = hint
+        # Stage 3: the start bucket's crossing, with no data-dependent branches
+        # between points so that the CPU overlaps consecutive points.
+        for col in range(nx):
+            h = _crossing(j0s[col], phis[col], m0s[col], rps[col], theta, pts, bidx,
+                          bstat, radius, half_width, wav, wav_s0, wav_inv_ds)
+            if h < out[row, col]:  # False for NaN (no workpiece): stays NaN
+                out[row, col] = h
+        # Stage 4: the buckets around it that the bounds cannot exclude, and the
+        # mirror family near the axis.
         hint_m = -1
         for col in range(nx):
-            h0 = out[row, col]
-            if np.isnan(h0):
+            best = out[row, col]
+            if np.isnan(best):
                 continue
-            x = x0 + (col0 + col) * dx
-            rp = np.sqrt(x * x + y * y)
-            phi = np.arctan2(y, x)
-            hint = _start_bucket(rp, bstat, direction, hint)
-            best = _envelope_pruned(phi, rp, h0, hint, theta, pts, bidx, bstat,
-                                    theta_ref, radius, half_width, wav, wav_s0,
-                                    wav_inv_ds, wav_bound, slack)
+            rp = rps[col]
+            phi = phis[col]
+            best = _walk_pruned(phi, m0s[col], rp, best, j0s[col], theta, pts, bidx,
+                                bstat, radius, half_width, wav, wav_s0, wav_inv_ds,
+                                wav_bound, slack)
             if rp <= mirror_rmax:
+                phm = phi + np.pi
+                m0m = np.ceil((theta_ref - phm) / TWO_PI)
                 hint_m = _start_bucket(-rp, bstat, direction, hint_m)
-                hm = _envelope_pruned(phi + np.pi, -rp, best, hint_m, theta, pts,
-                                      bidx, bstat, theta_ref, radius, half_width, wav,
-                                      wav_s0, wav_inv_ds, wav_bound, slack)
-                if hm < best:
-                    best = hm
+                h = _crossing(hint_m, phm, m0m, -rp, theta, pts, bidx, bstat, radius,
+                              half_width, wav, wav_s0, wav_inv_ds)
+                if h < best:
+                    best = h
+                best = _walk_pruned(phm, m0m, -rp, best, hint_m, theta, pts, bidx,
+                                    bstat, radius, half_width, wav, wav_s0,
+                                    wav_inv_ds, wav_bound, slack)
             out[row, col] = best
