@@ -443,10 +443,13 @@ def realisation_whole_part(quick: bool) -> dict:
     n_stream = 4_000_000 if quick else 40_000_000
     with tempfile.TemporaryDirectory() as d:
         t_stream = best_time(lambda: stream.to_memmap(f"{d}/v.npy", n_stream), repeat=1)
+        t_stream1 = best_time(
+            lambda: stream.to_memmap(f"{d}/v1.npy", n_stream, workers=1), repeat=1)
     peak = traced_peak(lambda: stream.segment(0, 1 << 22))
     return {
         "fft_samples": n_fft, "fft_samples_per_s": n_fft / t_fft,
         "stream_samples": n_stream, "stream_samples_per_s": n_stream / t_stream,
+        "stream_samples_per_s_1_thread": n_stream / t_stream1,
         "whole_face_samples": n_face,
         "whole_face_stream_estimate_s": n_face / (n_stream / t_stream),
         "points_per_s": n_stream / t_stream,

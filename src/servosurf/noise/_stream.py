@@ -22,6 +22,8 @@ __all__ = ["VibrationStream", "BLOCK"]
 
 #: White-noise block size in samples (the unit of seeding).
 BLOCK = 1 << 16
+#: Largest FFT of the overlap-save filter (samples): 4 x the default FIR length.
+NFFT_MAX = 1 << 17
 
 
 class VibrationStream:
@@ -69,16 +71,37 @@ class VibrationStream:
         h = np.fft.irfft(mag, taps)
         h = np.roll(h, taps // 2) * np.hanning(taps)
         self.h = h
+        self._H: dict[int, np.ndarray] = {}
         #: Expected RMS of the stream in m (from the FIR's energy).
         self.rms = float(np.sqrt(np.sum(h**2)))
 
     def _white(self, b0: int, b1: int) -> np.ndarray:
-        return np.concatenate(
-            [
-                np.random.default_rng([self.seed, b]).standard_normal(BLOCK)
-                for b in range(b0, b1)
-            ]
-        )
+        w = np.empty((b1 - b0) * BLOCK)
+        for b in range(b0, b1):
+            k = (b - b0) * BLOCK
+            np.random.default_rng([self.seed, b]).standard_normal(out=w[k : k + BLOCK])
+        return w
+
+    def _spectrum(self, nfft: int) -> np.ndarray:
+        H = self._H.get(nfft)
+        if H is None:
+            H = self._H[nfft] = sp.fft.rfft(self.h, nfft)
+        return H
+
+    def _filter(self, w: np.ndarray) -> np.ndarray:
+        """Valid-mode convolution of ``w`` with the FIR by overlap-save (m)."""
+        M = self.taps
+        n = w.size - M + 1
+        nfft = min(NFFT_MAX, sp.fft.next_fast_len(n + M - 1, real=True))
+        nfft = max(nfft, sp.fft.next_fast_len(2 * M, real=True))
+        H = self._spectrum(nfft)
+        step = nfft - M + 1
+        out = np.empty(n)
+        for k in range(0, n, step):
+            m = min(step, n - k)
+            seg = sp.fft.irfft(sp.fft.rfft(w[k : k + m + M - 1], nfft) * H, nfft)
+            out[k : k + m] = seg[M - 1 : M - 1 + m]
+        return out
 
     def segment(self, k0: int, n: int) -> np.ndarray:
         """Samples ``k0 .. k0 + n - 1`` of the series (m).
@@ -105,32 +128,80 @@ class VibrationStream:
         w1 = k0 + n + self.taps - 1
         b0, b1 = w0 // BLOCK, (w1 - 1) // BLOCK + 1
         w = self._white(b0, b1)[w0 - b0 * BLOCK : w1 - b0 * BLOCK]
-        return sp.signal.oaconvolve(w, self.h, mode="valid")
+        return self._filter(w)
 
     def to_memmap(
-        self, path, n: int, *, chunk: int = 1 << 22, progress=None
+        self, path, n: int, *, chunk: int = 1 << 22, progress=None,
+        workers: int | None = None,
     ) -> np.memmap:
         """Write samples ``0 .. n - 1`` to a float32 memory-mapped file (m).
 
         Parameters
         ----------
         path : str or Path
-            Output file (raw float32, little endian).
+            Output file (``.npy`` format, float32 little endian).
         n : int
             Number of samples.
         chunk : int, default: 4194304
-            Samples per computed chunk (bounds memory).
+            Samples per computed chunk (bounds memory: about 5 x 8 bytes x chunk
+            per worker).
         progress : callable, optional
             Wraps the chunk iterable (progress bar).
+        workers : int, optional
+            Threads computing chunks at once (default: the CPUs available to this
+            process). NumPy's generators and SciPy's FFT release the GIL, so the
+            chunks run in parallel; every chunk is the same whatever the count
+            (block seeding), so the file is identical for any ``workers``.
         """
+        import os
+        from concurrent.futures import ThreadPoolExecutor
+
+        if workers is None:
+            workers = len(os.sched_getaffinity(0)) if hasattr(
+                os, "sched_getaffinity") else (os.cpu_count() or 1)
+        workers = max(1, int(workers))
         mm = np.lib.format.open_memmap(
             str(path), mode="w+", dtype=np.float32, shape=(n,)
         )
-        starts = range(0, n, chunk)
-        if progress is not None:
-            starts = progress(starts)
-        for k in starts:
+
+        def one(k: int) -> int:
             m = min(chunk, n - k)
             mm[k : k + m] = self.segment(k, m)
+            return k
+
+        starts = range(0, n, chunk)
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            # bounded look-ahead: at most 2 x workers chunks in flight
+            done = _BoundedMap(pool, one, starts, 2 * workers)
+            if progress is not None:
+                done = progress(done)
+            for _ in done:
+                pass
         mm.flush()
         return mm
+
+
+class _BoundedMap:
+    """``pool.map`` in order with at most ``ahead`` submitted tasks (bounded memory);
+    sized, so that progress bars know the total."""
+
+    def __init__(self, pool, fn, items, ahead: int) -> None:
+        self.pool, self.fn, self.items, self.ahead = pool, fn, items, max(1, ahead)
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def __iter__(self):
+        from collections import deque
+
+        it = iter(self.items)
+        q: deque = deque()
+        for x in it:
+            q.append(self.pool.submit(self.fn, x))
+            if len(q) >= self.ahead:
+                break
+        while q:
+            yield q.popleft().result()
+            for x in it:
+                q.append(self.pool.submit(self.fn, x))
+                break
