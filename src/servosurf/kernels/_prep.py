@@ -6,7 +6,7 @@ Checked wrapper: :func:`servosurf.toolpath.sweep` (via ``prepare_path``).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ._config import CACHE, FASTMATH
 
@@ -128,7 +128,7 @@ def _crop_mask(theta, r, rmin, rmax, reach, has_window, centre, lo, hi,
     return count
 
 
-@njit(cache=CACHE, fastmath=FASTMATH)
+@njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
 def _interleave(t, theta, r, z, fs, pts, gap):  # pragma: no cover - numba
     """Interleave the path for the sweep kernels and flag gaps.
 
@@ -146,7 +146,7 @@ def _interleave(t, theta, r, z, fs, pts, gap):  # pragma: no cover - numba
     """
     n = t.size
     lim = 1.5 / fs
-    for i in range(n):
+    for i in prange(n):  # each i writes only row i (pages touched on both threads)
         pts[i, 0] = theta[i]
         pts[i, 1] = r[i]
         pts[i, 2] = z[i]
