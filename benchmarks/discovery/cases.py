@@ -742,7 +742,11 @@ def steady_peak_current(case) -> float:
     if "ipeak" not in _CASE:
         t = np.arange(int(0.1 * case.fs)) / case.fs
         u = case.simulate_path(ModelParams(), t)["u"]
-        _CASE["ipeak"] = float(np.max(np.abs(u)) * case.machine.actuator.current_gain)
+        # the limit acts on the demand applied after the fractional loop delay,
+        # (1 - frac) u[k] + frac u[k - 1]: a one-sample spike of u is halved there
+        frac = case.discrete(ModelParams())[4]
+        ua = (1.0 - frac) * u[1:] + frac * u[:-1]
+        _CASE["ipeak"] = float(np.max(np.abs(ua)) * case.machine.actuator.current_gain)
     return _CASE["ipeak"]
 
 
@@ -776,7 +780,11 @@ def draw_ool(kind: str, rng) -> tuple:
 
 
 def scale_to_enr(target: float, make, campaign: dict, s0: float) -> float:
-    """Strength s with ENR(s) = target (secant iterations in log-log)."""
+    """Strength s with ENR(s) = target (secant iterations in log-log).
+
+    Returns ``(s, enr(s))``: the caller checks that the target was reached (an
+    effect that vanishes below a threshold can leave ENR at zero).
+    """
     case = base_case()
     nom = nominal_recordings(campaign)
 
@@ -804,7 +812,7 @@ def scale_to_enr(target: float, make, campaign: dict, s0: float) -> float:
             e = f(s)
         else:
             s, e = s2, e2
-    return s
+    return s, e
 
 
 # ------------------------------------------------------------------ writing a case
@@ -900,34 +908,59 @@ def write_case(folder: Path, p: ModelParams, ool, campaign: dict, seed: int) -> 
     (folder / "manifest.toml").write_text(text)
 
 
+#: Largest accepted ratio between the achieved and the target ENR.
+ENR_TOLERANCE = 1.15
+#: Effect draws tried before the generator gives up on a case.
+MAX_DRAWS = 6
+
+
+def _scaled(target, draw_fn, make_fn, campaign, what):
+    """Draw an effect and scale it to ``target``; redraw when the target is missed."""
+    for _ in range(MAX_DRAWS):
+        d = draw_fn()
+        s, e = scale_to_enr(target, make_fn(d), campaign, d[-1])
+        if np.isfinite(e) and e > 0 and abs(math.log(e / target)) <= math.log(
+                ENR_TOLERANCE):
+            return d, s, e
+    raise RuntimeError(
+        f"{what}: ENR {target} not reached in {MAX_DRAWS} draws (last {e:.3g}); "
+        "the case would be mislabelled"
+    )
+
+
 def build(spec: dict, campaign: dict):
-    """Model of a case spec: ``(ModelParams, ool, truth)`` with strengths set.
+    """Model of a case spec: ``(ModelParams, ool, truth, enr_achieved)``.
 
     ``spec``: ``{"effects": [name, ...], "ool": name or None, "enr": float,
-    "seed": int}``.
+    "seed": int}``. Every effect is scaled to the target ENR and checked: the
+    achieved ENR (per effect, recorded in the key) is within ``ENR_TOLERANCE``.
     """
     rng = np.random.default_rng(spec["seed"] + 7919)
-    knobs, truths = [], {}
+    knobs, truths, achieved = [], {}, {}
     ool_make = None
     for name in spec["effects"]:
-        kn, tr, s0 = draw(name, rng)
-
-        def make1(s, kn=kn):
-            return ModelParams(**kn(s)), None
-
-        s = scale_to_enr(spec["enr"], make1, campaign, s0)
+        (kn, tr, _s0), s, e = _scaled(
+            spec["enr"],
+            lambda name=name: draw(name, rng),
+            lambda d: (lambda s, kn=d[0]: (ModelParams(**kn(s)), None)),
+            campaign,
+            name,
+        )
         knobs.append(kn(s))
         truths[name] = {k: float(v) for k, v in tr(s).items()}
+        achieved[name] = float(e)
     if spec.get("ool"):
-        om, okn, s0 = draw_ool(spec["ool"], rng)
-
-        def make2(s):
-            return ModelParams(**okn(s)), om(s)
-
-        s = scale_to_enr(spec["enr"], make2, campaign, s0)
+        (om, okn, _s0), s, e = _scaled(
+            spec["enr"],
+            lambda: draw_ool(spec["ool"], rng),
+            lambda d: (lambda s, om=d[0], okn=d[1]: (ModelParams(**okn(s)), om(s))),
+            campaign,
+            spec["ool"],
+        )
         knobs.append(okn(s))
         ool_make = om(s)
+        achieved[spec["ool"]] = float(e)
     kw: dict = {}
     for k in knobs:
         kw.update(k)
-    return ModelParams(**kw), ool_make, truths
+    return ModelParams(**kw), ool_make, truths, achieved

@@ -136,13 +136,25 @@ def make_one(args) -> dict:
     import cases as C
 
     campaign = C.CAMPAIGNS[campaign_name]
-    p, ool, truth = C.build(spec, campaign)
+    try:
+        p, ool, truth, achieved = C.build(spec, campaign)
+    except RuntimeError as exc:  # target ENR unreachable: no case, said in the key
+        return {
+            "case": spec["case"],
+            "effects": spec["effects"],
+            "ool": spec["ool"],
+            "enr": spec["enr"],
+            "seed": spec["seed"],
+            "generation_error": str(exc),
+            "campaign": campaign_name,
+        }
     C.write_case(Path(root) / "cases" / spec["case"], p, ool, campaign, spec["seed"])
     return {
         "case": spec["case"],
         "effects": spec["effects"],
         "ool": spec["ool"],
         "enr": spec["enr"],
+        "enr_achieved": achieved,
         "seed": spec["seed"],
         "truth": truth,
         "campaign": campaign_name,

@@ -158,7 +158,14 @@ def score(out: Path) -> dict:
     key = unseal(out)
     nom = _nominal()
     rows = []
+    skipped = [
+        {"case": k["case"], "effects": k["effects"], "ool": k["ool"],
+         "enr": k["enr"], "generation_error": k["generation_error"]}
+        for k in key["cases"] if "generation_error" in k
+    ]
     for k in key["cases"]:
+        if "generation_error" in k:
+            continue
         r = res.get(k["case"])
         row = {
             "case": k["case"],
@@ -185,7 +192,11 @@ def score(out: Path) -> dict:
             e = k["effects"][0]
             row["param_error"] = param_error(e, k["truth"][e], ex[0]["parameters"], nom)
         rows.append(row)
-    return summarise(rows)
+    out = summarise(rows)
+    # cases whose effect could not be scaled to the target ENR are not written;
+    # they are listed, not scored
+    out["not_generated"] = skipped
+    return out
 
 
 def _rate(rows, pred):
@@ -366,6 +377,11 @@ def table(s: dict) -> str:
         f"cases {s['cases']} (null {s['null_cases']}, out-of-catalogue "
         f"{s['ool_cases']}, two-effect {s['pair_cases']}, errors {s['errors']})"
     )
+    for g in s.get("not_generated", []):
+        lines.append(
+            f"not generated (not scored): {g['case']} {g['effects'] or g['ool']} "
+            f"ENR {g['enr']}: {g['generation_error']}"
+        )
     lines.append("")
     lines.append("| ENR | n | detection | top-1 | median parameter error |")
     lines.append("|---|---|---|---|---|")

@@ -140,6 +140,10 @@ class Effect:
     require: tuple | None = None
     #: configurations fitted per round (several for multimodal parameters)
     n_start = 1
+    #: a single threshold level (e.g. a current limit): its linearised screening
+    #: score says nothing (the effect is zero until the level is reached), so the
+    #: engine searches the level on the deviance itself over every configuration
+    threshold = False
 
     def n_params(self, cfg: Config | None = None) -> int:
         """Parameters counted by the selection criterion per term."""
@@ -665,6 +669,7 @@ class AmplifierSaturation(Effect):
     channels = ("following-error", "cut", "surface", "profile")
     tags = ("nonlin",)
     params = (ParamDoc("max_current", "A", "current limit I_max"),)
+    threshold = True
 
     def active(self, p):
         return math.isfinite(p.max_current)

@@ -368,24 +368,30 @@ class Engine:
 
         return dev(without) - dev(q) >= dmin
 
-    def line_search_1d(self, p: ModelParams, term: Term) -> ModelParams:
-        """Golden-section search on a single (log) parameter: thresholded modules."""
-        (f,) = term.effect.free(p, term.slot, self.loc, term.config)
-        v0 = float(f.get(p))
-        a, b = math.log(v0) - 0.7, math.log(v0) + 0.7
-
-        def d(x):
-            return self.deviance(f.set(p, math.exp(x)))
-
-        grid = np.linspace(a, b, 9)
-        vals = [d(x) for x in grid]
+    def level_search(self, p: ModelParams, eff: Effect, term: Term) -> ModelParams:
+        """Best level of a threshold module: deviance at every configuration, then
+        a bounded search between the neighbours of the best one (log scale)."""
+        cfgs = eff.configs(self.loc, p)
+        qs = [eff.start(p, cfg, None, self.loc) for cfg in cfgs]
+        (f,) = eff.free(qs[0], term.slot, self.loc, term.config)
+        levels = np.array([float(f.get(q)) for q in qs])
+        order = np.argsort(levels)
+        levels = levels[order]
+        qs = [qs[k] for k in order]
+        vals = [self.deviance(q) for q in qs]
         k = int(np.argmin(vals))
-        lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+        lo = math.log(levels[max(k - 1, 0)])
+        hi = math.log(levels[min(k + 1, levels.size - 1)])
+        if hi <= lo:
+            return qs[k]
+        q0 = qs[k]
         res = sp.optimize.minimize_scalar(
-            d, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4}
+            lambda x: self.deviance(f.set(q0, math.exp(x))),
+            bounds=(lo, hi),
+            method="bounded",
+            options={"xatol": 1e-6},
         )
-        best = res.x if res.fun <= vals[k] else grid[k]
-        return f.set(p, math.exp(best))
+        return f.set(q0, math.exp(res.x)) if res.fun <= vals[k] else q0
 
     # ------------------------------------------------------------ selection
     def run(self, *, max_terms: int = 6, n_fit: int = 3, progress=None):
@@ -443,9 +449,11 @@ class Engine:
                     continue
                 if prev and not self._distinct(c, prev):
                     continue
-                # fit the best few, skipping those far behind the leader
-                if c.score <= MIN_LINEAR_SCORE or (
-                    top > 0 and c.score < FIT_SHARE * top
+                # fit the best few, skipping those far behind the leader; threshold
+                # modules are searched on the deviance (their linear score is blind)
+                if not c.effect.threshold and (
+                    c.score <= MIN_LINEAR_SCORE
+                    or (top > 0 and c.score < FIT_SHARE * top)
                 ):
                     continue
                 seen.setdefault(c.effect.name, []).append(c)
@@ -455,8 +463,8 @@ class Engine:
                 q = c.effect.start(p, c.config, c.coefs, self.loc)
                 slot = c.effect.slots(q) - 1
                 tnew = Term(c.effect, slot, c.config)
-                if c.effect.name == "amplifier-saturation":
-                    q = self.line_search_1d(q, tnew)
+                if c.effect.threshold:
+                    q = self.level_search(p, c.effect, tnew)
                 if c.effect.name == "base-vibration-lines":
                     q = self.line_frequency_search(q, tnew)
                 q = self.fit(q, terms + [tnew], only_last=True)
