@@ -23,7 +23,9 @@ def _umask() -> int:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike[str], *, suffix: str = ".part") -> Iterator[Path]:
+def atomic_path(
+    path: str | os.PathLike[str], *, suffix: str = ".part"
+) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it over ``path`` on success.
 
     Parameters

@@ -261,7 +261,9 @@ def simulate(
         for h in hooks:
             if hasattr(h, "path_z"):
                 theta, radius = spec.path.theta_at(t), spec.path.radius_at(t)
-                extra = extra + np.asarray(h.path_z(t, theta, radius, z_cmd), dtype=float)
+                extra = extra + np.asarray(
+                    h.path_z(t, theta, radius, z_cmd), dtype=float
+                )
         dev["hooks"] = extra
 
     with _progress.stage("toolpath samples over the field"):

@@ -16,7 +16,8 @@ PNG = b"\x89PNG\r\n\x1a\n"
 def test_help_imports_nothing_heavy():
     code = (
         "import sys; from servosurf.cli import build_parser; build_parser(); "
-        "heavy = [m for m in ('numba', 'matplotlib', 'pyvista', 'scipy') if m in sys.modules];"
+        "heavy = [m for m in ('numba', 'matplotlib', 'pyvista', 'scipy') "
+        "if m in sys.modules];"
         "print(heavy)"
     )
     out = subprocess.run(

@@ -1,4 +1,7 @@
-"""Error synthesis (Eqs 8-12), realisations, Welch estimates, PSD files, design study."""
+"""Error synthesis (Eqs 8-12), realisations, Welch estimates, PSD files.
+
+Also the design study.
+"""
 
 from __future__ import annotations
 

@@ -1,1 +1,4 @@
-"""One module per CLI subcommand: ``add_parser(subparsers)`` and ``run(args) -> int``."""
+"""One module per CLI subcommand.
+
+Each defines ``add_parser(subparsers)`` and ``run(args) -> int``.
+"""

@@ -10,10 +10,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "compare",
         help="compare a measured map with a simulation (registration, residual)",
         description="Bring a measured and a simulated map onto one grid (the coarser "
-        "pitch), register them with sub-pixel accuracy (lenslet by lenslet when the map "
-        "holds a lenslet array), remove piston/tilt/sphere and report the residual, "
-        "profile and spectra overlays and metrics (RMS and PV residual in m, fit %, "
-        "correlation).",
+        "pitch), register them with sub-pixel accuracy (lenslet by lenslet when the "
+        "map holds a lenslet array), remove piston/tilt/sphere and report the "
+        "residual, profile and spectra overlays and metrics (RMS and PV residual in "
+        "m, fit %, correlation).",
     )
     p.add_argument(
         "measured", metavar="MEASURED", help="measured map (any readable format)"

@@ -1,4 +1,7 @@
-"""``servosurf face``: a whole face, tiled into a chunked Zarr array (optionally on dask)."""
+"""``servosurf face``: a whole face, tiled into a chunked Zarr array.
+
+The tiles are computed in this process or, optionally, on dask.
+"""
 
 from __future__ import annotations
 
@@ -36,7 +39,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    "(default: run in this process)")
     p.add_argument("--workers", metavar="N", type=int, default=2,
                    help="worker processes of the local cluster (default 2)")
-    p.add_argument("--out", metavar="DIR", default="results/face", help="output directory")
+    p.add_argument("--out", metavar="DIR", default="results/face",
+                   help="output directory")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     return p
 
@@ -44,7 +48,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     import dataclasses
     import shutil
-    from pathlib import Path
 
     import numpy as np
 
@@ -64,7 +67,9 @@ def run(args) -> int:
         raise ConfigError(f"--chunk must be at least 16 pixels, got {args.chunk}")
     spec = load_toolpath(args.toolpath)
     if spec.kind != "facing":
-        raise ConfigError(f"{args.toolpath}: face needs a facing toolpath, got {spec.kind!r}")
+        raise ConfigError(
+            f"{args.toolpath}: face needs a facing toolpath, got {spec.kind!r}"
+        )
     out = out_dir(args.out)
     field = face_field(args.radius, args.pitch)
     # the path runs from one arc half-width outside the face to the axis
@@ -82,7 +87,9 @@ def run(args) -> int:
             raise ConfigError(f"the loop is unstable at {args.bandwidth:g} Hz")
         n = int(np.ceil(spec.path.duration * loop.fs)) + 4
         vib = out / "vibration.npy"
-        with stage(f"vibration realisation: {n} samples ({n / loop.fs:.0f} s of cutting)"):
+        with stage(
+            f"vibration realisation: {n} samples ({n / loop.fs:.0f} s of cutting)"
+        ):
             write_vibration(loop, vib, n, seed=args.seed,
                             progress=lambda it: bar(it, desc="vibration"))
         deviation = MemmapDeviation(str(vib.resolve()))
@@ -112,8 +119,9 @@ def run(args) -> int:
             client.close()
         if cluster is not None:
             cluster.close()
-    summary.update(seconds=res.seconds, points=res.n_points, points_per_s=res.points_per_s,
-                   tasks=res.n_tasks, path_samples=res.n_samples, zarr=str(store))
+    summary.update(seconds=res.seconds, points=res.n_points,
+                   points_per_s=res.points_per_s, tasks=res.n_tasks,
+                   path_samples=res.n_samples, zarr=str(store))
     with stage("decimated preview"):
         step = max(1, int(np.ceil(max(field.shape) / 1000)))
         z = np.asarray(res.array[::step, ::step])
@@ -123,7 +131,8 @@ def run(args) -> int:
                        x0=field.x0, y0=field.y0)
         plot_map(prev, out / "face.png", title=f"face, every {step}th pixel")
         v = z[np.isfinite(z)]
-        summary.update(preview_step=step, preview_sq_m=float(np.std(v)) if v.size else None)
+        summary.update(preview_step=step,
+                       preview_sq_m=float(np.std(v)) if v.size else None)
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)

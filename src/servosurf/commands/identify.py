@@ -9,9 +9,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "identify",
         help="fit machine parameters to a measured open-loop FRF",
-        description="Grey-box identification (paper section 3.1): fit masses, stiffnesses "
-        "and dampings to an open-loop FRF (DAC volts -> sensor volts) in a CSV "
-        "'frequency_hz,real,imag'. Reports MATLAB's fit percent and writes "
+        description="Grey-box identification (paper section 3.1): fit masses, "
+        "stiffnesses and dampings to an open-loop FRF (DAC volts -> sensor volts) in "
+        "a CSV 'frequency_hz,real,imag'. Reports MATLAB's fit percent and writes "
         "fitted-machine.toml.",
     )
     p.add_argument("frf", metavar="FRF.csv", help="measured FRF (Hz, V/V)")

@@ -65,7 +65,8 @@ def run(args) -> int:
     else:
         for m in out:
             print(
-                f"{m['name']}: {m['description']} (moving mass {m['moving_mass_kg']:g} kg; "
+                f"{m['name']}: {m['description']} "
+                f"(moving mass {m['moving_mass_kg']:g} kg; "
                 f"disturbances: {', '.join(m['disturbance_calibrations'])})"
             )
     return 0

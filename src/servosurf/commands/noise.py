@@ -9,9 +9,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "noise",
         help="positioning-error study: FRFs, CAS, RMS vs bandwidth, spectra",
-        description="Synthesise real and following positioning errors from the disturbance "
-        "PSDs (seed paper Eqs 8-12) for one or more moving masses; write PNG figures and a "
-        "JSON summary. Bandwidths are open-loop crossover frequencies.",
+        description="Synthesise real and following positioning errors from the "
+        "disturbance PSDs (seed paper Eqs 8-12) for one or more moving masses; write "
+        "PNG figures and a JSON summary. Bandwidths are open-loop crossover "
+        "frequencies.",
     )
     p.add_argument(
         "--machine",

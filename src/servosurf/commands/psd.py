@@ -9,14 +9,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "psd",
         help="estimate a PSD from recorded time series (Welch), write frequency_hz,psd",
-        description="Estimate a one-sided PSD by Welch averaging, as the paper did (records "
-        "of 4096 samples at 199.6 kHz, 32 repeats), from a CSV 'time_s,value' (one long "
-        "record cut into segments) or an NPZ with 'records' (records x samples) and "
-        "'fs_hz'. Values in SI (m for sensor noise and base vibration, A for current "
-        "noise); the PSD is in unit^2/Hz. The CSV it writes is what a machine file's "
-        "[disturbances.*] csv = ... expects.",
+        description="Estimate a one-sided PSD by Welch averaging, as the paper did "
+        "(records of 4096 samples at 199.6 kHz, 32 repeats), from a CSV 'time_s,value' "
+        "(one long record cut into segments) or an NPZ with 'records' "
+        "(records x samples) and 'fs_hz'. Values in SI (m for sensor noise and base "
+        "vibration, A for current noise); the PSD is in unit^2/Hz. The CSV it writes "
+        "is what a machine file's [disturbances.*] csv = ... expects.",
     )
-    p.add_argument("record", metavar="FILE", help="CSV time_s,value or NPZ records/fs_hz")
+    p.add_argument("record", metavar="FILE",
+                   help="CSV time_s,value or NPZ records/fs_hz")
     p.add_argument("--nperseg", type=int, default=4096,
                    help="samples per Welch segment (default 4096)")
     p.add_argument("--out", metavar="PSD.csv", required=True, help="output CSV")

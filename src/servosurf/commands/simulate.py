@@ -11,9 +11,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "simulate",
         help="simulate the surface an FTS cuts (height map, figures, summary)",
-        description="Sweep the round-nose tool along the toolpath with the servo tracking, "
-        "cutting-force and vibration deviations; write the height map, summary.json and "
-        "PNG figures. Bandwidths are open-loop crossover frequencies.",
+        description="Sweep the round-nose tool along the toolpath with the servo "
+        "tracking, cutting-force and vibration deviations; write the height map, "
+        "summary.json and PNG figures. Bandwidths are open-loop crossover frequencies.",
     )
     p.add_argument("toolpath", metavar="TOOLPATH.toml", help="toolpath definition")
     p.add_argument(
@@ -53,8 +53,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--instrument",
         metavar="NAME",
         default="cp300-20x",
-        help="interferometer model applied to the machined map: cp300-20x (default, the "
-        "paper's instrument), newview-20x/50x/100x, or none",
+        help="interferometer model applied to the machined map: cp300-20x (default, "
+        "the paper's instrument), newview-20x/50x/100x, or none",
     )
     p.add_argument(
         "--format",

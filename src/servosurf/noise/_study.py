@@ -53,7 +53,7 @@ def _stable(machine: Machine, bandwidth: float) -> bool:
 def stability_limit(
     machine: Machine, *, fmin: float = 100.0, fmax: float = 20e3, rtol: float = 1e-3
 ) -> float:
-    """Lowest crossover bandwidth (Hz) above ``fmin`` at which the tuned loop is unstable.
+    """Lowest crossover bandwidth (Hz) above ``fmin`` where the tuned loop is unstable.
 
     Scans upward in 5 % steps, then bisects to ``rtol``. Returns ``inf`` when the
     loop stays stable (and tunable) up to ``fmax``.

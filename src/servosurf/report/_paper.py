@@ -145,8 +145,8 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
         )
     )
     notes.append(
-        "The paper's 0.155 nm (section 3.3) and 0.23 nm (section 5.2) real-error RMS at "
-        "468 Hz, 0.175 kg disagree; no single disturbance calibration gives both. "
+        "The paper's 0.155 nm (section 3.3) and 0.23 nm (section 5.2) real-error RMS "
+        "at 468 Hz, 0.175 kg disagree; no single disturbance calibration gives both. "
         f"Under section-5.2 the real RMS at 468 Hz is {bud.rms_real() * 1e9:.3f} nm; "
         "under section-3.3 it is the 0.155 nm row."
     )
@@ -303,10 +303,10 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
         )
     notes.append(
         "The paper's own numbers disagree on the second vibration: its model puts the "
-        "real-error peaks at 7.4 and 11.7 kHz (Fig. 13c), which at 42.3 mm/s are 175 and "
-        "277 mm^-1, while its 5 um surface shows 170 and 255 mm^-1 (7.2 and 10.8 kHz) "
-        "and its 10 um surface 6.6 and 11.5 kHz. servosurf keeps the 7.4/11.7 kHz modes "
-        f"of section 5.2; its 5 um surface peaks are "
+        "real-error peaks at 7.4 and 11.7 kHz (Fig. 13c), which at 42.3 mm/s are 175 "
+        "and 277 mm^-1, while its 5 um surface shows 170 and 255 mm^-1 (7.2 and 10.8 "
+        "kHz) and its 10 um surface 6.6 and 11.5 kHz. servosurf keeps the 7.4/11.7 kHz "
+        f"modes of section 5.2; its 5 um surface peaks are "
         f"{', '.join(f'{p / 1e3:.0f}' for p in pk)} mm^-1."
     )
     rows.append(
@@ -428,8 +428,9 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     notes.append(
         f"Flat Ra: kinematic {ra['kinematic'] * 1e9:.3f} nm, +force "
         f"{ra['kinematic+force'] * 1e9:.3f} nm, +vibration "
-        f"{ra['kinematic+vibration'] * 1e9:.3f} nm, all {ra['all'] * 1e9:.3f} nm against "
-        "1.2 nm measured: the gap is physics the model leaves out (material side flow, "
-        "elastic recovery, tool edge, spindle), for `servosurf diagnose` to locate."
+        f"{ra['kinematic+vibration'] * 1e9:.3f} nm, all {ra['all'] * 1e9:.3f} nm "
+        "against 1.2 nm measured: the gap is physics the model leaves out (material "
+        "side flow, elastic recovery, tool edge, spindle), for `servosurf diagnose` "
+        "to locate."
     )
     return rows, notes

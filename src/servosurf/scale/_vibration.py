@@ -12,7 +12,9 @@ from ..errors import ConfigError
 __all__ = ["MemmapDeviation", "write_vibration"]
 
 
-def write_vibration(loop, path: str | Path, n: int, *, seed: int, progress=None) -> Path:
+def write_vibration(
+    loop, path: str | Path, n: int, *, seed: int, progress=None
+) -> Path:
     """Realise ``n`` samples of the loop's real positioning error into ``path``.
 
     Uses :class:`servosurf.noise.VibrationStream` (block-seeded, bounded memory) and

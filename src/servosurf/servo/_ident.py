@@ -87,7 +87,10 @@ def write_frf_csv(path: str | Path, freq: np.ndarray, frf: np.ndarray) -> None:
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
-    """MATLAB's normalised fit: ``100 (1 - ||y - yhat|| / ||y - mean(y)||)`` in percent."""
+    """MATLAB's normalised fit in percent.
+
+    ``100 (1 - ||y - yhat|| / ||y - mean(y)||)``.
+    """
     y = np.asarray(y)
     yhat = np.asarray(yhat)
     den = np.linalg.norm(y - y.mean())

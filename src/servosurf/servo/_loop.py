@@ -588,6 +588,7 @@ def tune_pidf(
     if not (kp > 0 and kd >= 0):
         raise ModelError(
             f"cannot tune a PIDF for a {fc:g} Hz crossover with {c.phase_margin:g} deg "
-            f"phase margin (Kp={kp:.3g}, Kd={kd:.3g}); lower the bandwidth or the margin"
+            f"phase margin (Kp={kp:.3g}, Kd={kd:.3g}); "
+            "lower the bandwidth or the margin"
         )
     return PIDF(float(kp), float(kp * ki_ratio), float(kd), float(tf), c.sample_rate)

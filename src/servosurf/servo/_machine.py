@@ -375,15 +375,19 @@ class Machine:
         new = getattr(mech, target) + extra
         if not new > 0:
             raise ConfigError(
-                f"--mass {mass:g} kg leaves {target} = {new:g} kg; the moving mass must "
-                f"exceed {mech.moving_mass - getattr(mech, target):g} kg"
+                f"--mass {mass:g} kg leaves {target} = {new:g} kg; "
+                "the moving mass must exceed "
+                f"{mech.moving_mass - getattr(mech, target):g} kg"
             )
         return dataclasses.replace(
             self, mechanics=dataclasses.replace(mech, **{target: new})
         )
 
     def with_bandwidth(self, bandwidth: float) -> Machine:
-        """Return a copy tuned for a new crossover ``bandwidth`` in Hz (gains cleared)."""
+        """Return a copy tuned for a new crossover ``bandwidth`` in Hz.
+
+        The controller gains are cleared.
+        """
         if not bandwidth > 0:
             raise ConfigError(f"bandwidth must be > 0 Hz, got {bandwidth!r}")
         c = dataclasses.replace(
@@ -413,7 +417,10 @@ class Machine:
         return dump_toml(self.to_mapping(), header=header)
 
     def to_mapping(self) -> dict:
-        """Kebab-case mapping suitable for TOML (see :func:`servosurf.config.dump_toml`)."""
+        """Kebab-case mapping suitable for TOML.
+
+        See :func:`servosurf.config.dump_toml`.
+        """
         m = to_mapping(self)
         m.pop("path", None)
         return m
@@ -497,8 +504,8 @@ def load_machine(source: str | Path | None = None) -> Machine:
     if parent is not None:
         if not isinstance(parent, str) or parent not in builtins:
             raise ConfigError(
-                f"{path}: inherit must name a built-in machine ({', '.join(builtins)}), "
-                f"got {parent!r}"
+                f"{path}: inherit must name a built-in machine "
+                f"({', '.join(builtins)}), got {parent!r}"
             )
         data = _merge(load_toml(builtins[parent]), data)
     try:
@@ -510,5 +517,8 @@ def load_machine(source: str | Path | None = None) -> Machine:
 
 
 def describe_machine() -> list[dict]:
-    """Return the documented parameter list of a machine file (key, unit, doc, source)."""
+    """Return the documented parameter list of a machine file.
+
+    Each entry gives the key, unit, doc and source.
+    """
     return describe(Machine)

@@ -17,7 +17,8 @@ With ``Z(s)`` of Eq 4 (the dynamic stiffness at x2 with m1 removed) this network
 * Eq 2 with numerator ``(k1 + c1 s)`` instead of the paper's ``k1`` (the paper drops
   the damper in the numerator while keeping it in the denominator);
 * Eq 3 with base motion entering at the ground (through k3/c3 and k5/c5), numerator
-  ``(k1 + c1 s) [k5 + c5 s + (k3 + c3 s)(k2 + c2 s) / (k3 + c3 s + m3 s^2 + k2 + c2 s)]``
+  ``(k1 + c1 s) [k5 + c5 s + (k3 + c3 s)(k2 + c2 s) /
+  (k3 + c3 s + m3 s^2 + k2 + c2 s)]``
   instead of the paper's ``k1 (k2 + c2 s)`` (which assumes the carriage itself is the
   vibrating base and disagrees with Eq 4, where the carriage has its own dynamics).
 
