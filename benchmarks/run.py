@@ -379,7 +379,7 @@ def whole_face_dask(quick: bool) -> dict:
             client.run(_warm_worker)  # kernels loaded in both workers
             dres = simulate_face(spec, d + "/dask.zarr", field=field,
                                  face_radius=radius, chunk=(512, 512), deviation=dev,
-                                 client=client)
+                                 client=client, n_threads=1)
         same = bool(np.array_equal(local.array[:], dres.array[:], equal_nan=True))
     finally:
         shutil.rmtree(d, ignore_errors=True)
@@ -394,6 +394,39 @@ def whole_face_dask(quick: bool) -> dict:
         "speedup_vs_exhaustive": None,
         "peak_memory_bytes": None,
     }
+
+
+@case("memory_bandwidth")
+def memory_bandwidth(quick: bool) -> dict:
+    """Streaming triad a = b + s c over 3 x 128 MB, 1 and 2 threads (GB/s).
+
+    The path stage of a tile (sampling, interleaving, bucket bounds: ~6 samples of
+    ~100 bytes per pixel on a whole face) streams memory; this is its ceiling.
+    """
+    import numba
+    from numba import njit, prange
+
+    @njit(parallel=True)
+    def triad(a, b, c, s):
+        for i in prange(a.size):
+            a[i] = b[i] + s * c[i]
+
+    n = (4 if quick else 16) * 1024 * 1024
+    a, b, c = np.zeros(n), np.ones(n), np.full(n, 2.0)
+    triad(a, b, c, 3.0)
+    out = {}
+    old = numba.get_num_threads()
+    try:
+        for nt in (1, 2):
+            numba.set_num_threads(nt)
+            t = best_time(lambda: triad(a, b, c, 3.0), 5)
+            out[f"bytes_per_s_{nt}_thread{'s' if nt > 1 else ''}"] = 3 * 8 * n / t
+    finally:
+        numba.set_num_threads(old)
+    out["thread_scaling"] = out["bytes_per_s_2_threads"] / out["bytes_per_s_1_thread"]
+    out.update(points_per_s=None, speedup_vs_reference=None,
+               speedup_vs_exhaustive=None, peak_memory_bytes=3 * 8 * n)
+    return out
 
 
 @case("flops_ceiling")

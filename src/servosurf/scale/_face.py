@@ -25,7 +25,7 @@ from .._validation import check_no_kwargs, check_positive
 from ..errors import ConfigError
 from ..toolpath._paths import ToolpathSpec
 from ..toolpath._sample import SampledPath, count_samples, field_reach, sample
-from ..toolpath._sweep import prepare_path, run_kernel
+from ..toolpath._sweep import _threads, prepare_path, run_kernel
 from ..toolpath._tool import Field
 from ._memory import reuse_freed_memory
 
@@ -202,26 +202,29 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
             edges = np.linspace(span[0], span[1], k + 1)
             windows = [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:],
                                                            strict=True)]
-    for win in windows:
-        path = sample(spec, fs=fs, field=sf, reach=reach, t_window=win,
-                      max_samples=max(2 * max_tile_samples, n if win is None else 0, 1))
-        stats["n_samples"] += path.n
-        stats["n_subtiles"] += 1
-        if path.n < 2:
-            continue
-        if deviation is not None:
-            path = path.add_z(deviation(path))
-        if path.z.min() < z_floor - 1e-15:
-            raise ConfigError(
-                f"the deviation takes the tool {-(path.z.min() - z_floor):.3g} m below "
-                f"the commanded depth plus depth_margin ({depth_margin:g} m); raise "
-                "depth_margin"
-            )
-        prep = prepare_path(path, tool, field, rows=rows, cols=cols, crop=False)
-        if prep is None:
-            continue
-        run_kernel(prep, tool, field, out, n_threads=n_threads, row0=rows[0],
-                   col0=cols[0])
+    # every parallel stage of the tile (sampling, interleave, kernel) uses n_threads
+    with _threads(n_threads):
+        for win in windows:
+            cap = max(2 * max_tile_samples, n if win is None else 0, 1)
+            path = sample(spec, fs=fs, field=sf, reach=reach, t_window=win,
+                          max_samples=cap)
+            stats["n_samples"] += path.n
+            stats["n_subtiles"] += 1
+            if path.n < 2:
+                continue
+            if deviation is not None:
+                path = path.add_z(deviation(path))
+            if path.z.min() < z_floor - 1e-15:
+                below = -(path.z.min() - z_floor)
+                raise ConfigError(
+                    f"the deviation takes the tool {below:.3g} m below the commanded "
+                    f"depth plus depth_margin ({depth_margin:g} m); raise depth_margin"
+                )
+            prep = prepare_path(path, tool, field, rows=rows, cols=cols, crop=False)
+            if prep is None:
+                continue
+            run_kernel(prep, tool, field, out, n_threads=n_threads, row0=rows[0],
+                       col0=cols[0])
     return out, stats
 
 
@@ -323,7 +326,8 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
     client : distributed.Client or str, optional
         Run one task per chunk on this dask client (or scheduler address).
     n_threads : int, optional
-        Numba threads per task (in-process runs).
+        Numba threads per task, in process and on the dask workers (default:
+        numba's default, all cores of the process's machine).
     max_tile_samples : int, default: 4_000_000
         Memory bound per (sub-)tile path.
 
@@ -388,7 +392,8 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
         own = isinstance(client, str)
         cl = Client(client) if own else client
         try:
-            futs = [cl.submit(_chunk_task, spec, field, rows, cols, store, kw,
+            kw_task = dict(kw, n_threads=n_threads)
+            futs = [cl.submit(_chunk_task, spec, field, rows, cols, store, kw_task,
                               pure=False) for rows, cols in tasks]
             for fut in bar(as_completed(futs), total=len(futs), desc="tiles"):
                 stats = fut.result()
