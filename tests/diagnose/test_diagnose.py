@@ -311,3 +311,33 @@ def test_pointwise_surface_matches_the_sweep_kernel():
                         traj).reshape(xx.shape)
     assert (z < -1e-6).mean() > 0.2  # the field holds a good part of a lenslet
     np.testing.assert_allclose(z, ref.z, rtol=0, atol=1e-15)  # 1 fm
+
+
+def test_force_excess_test_is_calibrated_with_an_estimated_sigma():
+    """White force noise, sigma from the MAD of differences as ForceBlock does: the
+    power-excess test's false-alarm rate matches its nominal level (the chi2(n)
+    test that treats sigma as known fires about 6x too often at 1 %)."""
+    import math
+
+    from servosurf.diagnose._locate import _chi2_logsf, force_excess_logsf
+
+    rng = np.random.default_rng(11)
+    n, trials = 8192, 1500
+    lp_new, lp_naive = [], []
+    for _ in range(trials):
+        x = rng.standard_normal(n) * 2e-3  # N
+        d = np.diff(x)
+        sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
+        r = x / sig
+        lp_new.append(force_excess_logsf(r))
+        lp_naive.append(_chi2_logsf(float(r @ r), n))
+    fa_new = np.mean(np.array(lp_new) < -2)  # nominal 1 %
+    fa_naive = np.mean(np.array(lp_naive) < -2)
+    assert 0.003 <= fa_new <= 0.022, fa_new
+    assert fa_naive > 0.03, fa_naive
+    # a real excess (8 % of the variance) is still found
+    x = rng.standard_normal(32768)
+    d = np.diff(x)
+    sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
+    slow = 0.4 * np.sin(np.linspace(0, 20 * np.pi, x.size))  # smooth misfit
+    assert force_excess_logsf((x + slow) / sig) < -4
