@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sweep", "arc_height"]
+__all__ = ["sweep", "arc_height", "crop_mask", "max_slope", "bucket_ranges"]
 
 
 def arc_height(zc, dr, radius, wav=None):
@@ -98,3 +98,49 @@ def sweep(t, theta, r, z, fs, x, y, radius, half_width, initial, wav=None):
                     best = min(best, h)
             out[i, j] = best
     return out
+
+
+def crop_mask(theta, r, rmin, rmax, reach, window=None):
+    """Samples of every interval that can cut the rectangle [rmin, rmax] x window.
+
+    An interval (i, i + 1) hits when its radial range comes within ``reach`` (m) of
+    [rmin, rmax] (or reaches across the axis) and, with ``window = (centre, lo,
+    hi)`` in rad, its angular span meets [centre + lo, centre + hi] modulo 2 pi.
+    Both samples of a hitting interval are kept. Returns (mask, count).
+    """
+    rl = np.minimum(r[:-1], r[1:])
+    rh = np.maximum(r[:-1], r[1:])
+    hit = ((rl <= rmax + reach) & (rh >= rmin - reach)) | (rl <= reach - rmin)
+    if window is not None:
+        centre, lo, hi = window
+        rel = np.mod(theta[:-1] - centre + np.pi, 2 * np.pi) - np.pi
+        dth = np.diff(theta)
+        ang = ((rel <= hi) & (rel + dth >= lo)) | (rel - 2 * np.pi + dth >= lo) | (
+            dth >= 2 * np.pi)
+        hit &= ang
+    keep = np.zeros(theta.size, dtype=bool)
+    keep[:-1] |= hit
+    keep[1:] |= hit
+    return keep, int(keep.sum())
+
+
+def max_slope(t, theta, r, z, fs, r_skip):
+    """Largest |dz / ds| over consecutive samples (time step <= 1.5 / fs) whose mid
+    radius is at least ``r_skip`` (m); returns (slope, first interval index or -1)."""
+    rm = 0.5 * (r[:-1] + r[1:])
+    ds = rm * np.diff(theta)
+    ok = (np.diff(t) <= 1.5 / fs) & (rm >= r_skip) & (ds > 0)
+    s = np.zeros(rm.size)
+    s[ok] = np.abs(np.diff(z)[ok]) / ds[ok]
+    if s.size == 0 or s.max() <= 0.0:
+        return 0.0, -1
+    return float(s.max()), int(np.argmax(s))
+
+
+def bucket_ranges(theta, theta_ref, n_buckets):
+    """For bucket j = [theta_ref + 2 pi j, theta_ref + 2 pi (j + 1)): the first
+    sample at or after its start and the first at or after its end (rad)."""
+    j = np.arange(n_buckets)
+    start = theta_ref + 2 * np.pi * j
+    end = theta_ref + 2 * np.pi * (j + 1)
+    return np.searchsorted(theta, start, "left"), np.searchsorted(theta, end, "left")

@@ -78,7 +78,7 @@ TH_LO, TH_HI, TH_FIRST, GSCALE = 10, 11, 12, 13
 N_STAT = 16
 
 
-@njit(cache=CACHE, fastmath=FASTMATH)
+@njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
 def _bucket_stats(theta, r, z, gap, theta_ref, bidx, bstat):  # pragma: no cover - numba
     """Fill the per-revolution bucket index ranges and bounds.
 
@@ -107,19 +107,18 @@ def _bucket_stats(theta, r, z, gap, theta_ref, bidx, bstat):  # pragma: no cover
     -----
     ``n_buckets = floor((theta[-1] - theta_ref) / (2 pi)) + 1`` so that every sample
     belongs to a bucket. The bounds include the samples just outside the bucket, so
-    any interpolated crossing of the bucket lies inside them.
+    any interpolated crossing of the bucket lies inside them. Buckets are filled in
+    parallel (their sample ranges found by binary search); the prefix and suffix
+    hulls follow serially.
     """
     n = theta.size
     nb = bidx.shape[0]
-    i = 0
-    for j in range(nb):
+    for j in prange(nb):  # each bucket writes only its own rows
         start = theta_ref + TWO_PI * j
         end = theta_ref + TWO_PI * (j + 1)
-        while i < n and theta[i] < start:
-            i += 1
-        k = i
-        while k < n and theta[k] < end:
-            k += 1
+        # i: first sample with theta >= start; k: first with theta >= end (or n)
+        i = np.searchsorted(theta, start, side="left")
+        k = np.searchsorted(theta, end, side="left")
         lo = i - 1 if i > 0 else 0
         hi = k if k < n else n - 1
         bidx[j, 0] = lo
@@ -542,29 +541,33 @@ def _row_polar(y, x0, dx, col0, rps, phis):  # pragma: no cover - numba
     """
     nx = rps.size
     yy = y * y
-    a = col0 - col0 % ANCHOR  # anchor column of the first point
-    xa = x0 + a * dx
-    pa = np.arctan2(y, xa)
-    k = col0 - a  # position inside the anchor block
-    for col in range(nx):
-        c = col0 + col
-        x = x0 + c * dx
+    for col in range(nx):  # branch-free: vectorises
+        x = x0 + (col0 + col) * dx
         rps[col] = np.sqrt(x * x + yy)
-        if k == ANCHOR:
-            k = 0
-            a += ANCHOR
-            xa = x0 + a * dx
-            pa = np.arctan2(y, xa)
-        k += 1
-        den = xa * x + yy
-        num = y * (xa - x)
-        if den > 0.0 and abs(num) <= T_SERIES * den:
-            t = num / den
+    a = col0 - col0 % ANCHOR  # anchor column of the first point
+    while a < col0 + nx:
+        xa = x0 + a * dx
+        pa = np.arctan2(y, xa)
+        c_lo = max(a, col0) - col0
+        c_hi = min(a + ANCHOR, col0 + nx) - col0
+        fallback = False
+        for col in range(c_lo, c_hi):  # branch-free: vectorises
+            x = x0 + (col0 + col) * dx
+            den = xa * x + yy
+            num = y * (xa - x)
+            t = num / (den if den != 0.0 else 1.0)  # den == 0: fallback below
             t2 = t * t
             phis[col] = pa + t * (1.0 - t2 * (1.0 / 3.0 - t2 * (
                 0.2 - t2 * (1.0 / 7.0 - t2 * (1.0 / 9.0)))))
-        else:
-            phis[col] = np.arctan2(y, x)
+            fallback |= not (den > 0.0 and abs(num) <= T_SERIES * den)
+        if fallback:  # near the spindle axis: exact arctan2 where the series is off
+            for col in range(c_lo, c_hi):
+                x = x0 + (col0 + col) * dx
+                den = xa * x + yy
+                num = y * (xa - x)
+                if not (den > 0.0 and abs(num) <= T_SERIES * den):
+                    phis[col] = np.arctan2(y, x)
+        a += ANCHOR
 
 
 @njit(parallel=True, nogil=True, cache=CACHE, fastmath=FASTMATH)

@@ -47,16 +47,42 @@ def check_clearance(path: SampledPath, tool: Tool, *, stacklevel: int = 2) -> fl
     Intervals within one nose radius of the spindle axis are skipped: there the
     cutting speed vanishes and any height change exceeds every clearance angle.
     """
-    from ..kernels._prep import _max_slope
-
     if path.n < 2:
         return 0.0
-    slope, k = _max_slope(path.t, path.theta, path.r, path.z, path.fs,
-                          tool.nose_radius)
+    slope, k = _max_slope(path, tool.nose_radius)
+    return _warn_clearance(path, tool, slope, k, stacklevel + 1)
+
+
+def _n_chunks(n: int) -> int:
+    import numba
+
+    return max(1, min(n // 4096, 4 * numba.get_num_threads()))
+
+
+def _scan_slope(path: SampledPath, r_skip: float) -> tuple[bool, float, int]:
+    """(faulty, largest slope along the cut, its first sample): one parallel pass."""
+    from ..kernels._prep import _scan_slope
+
+    nc = _n_chunks(path.n)
+    bad, slope, k = _scan_slope(path.t, path.theta, path.r, path.z, path.fs, r_skip,
+                                nc, np.empty((nc, 2)))
+    return bool(bad), float(slope), int(k)
+
+
+def _max_slope(path: SampledPath, r_skip: float) -> tuple[float, int]:
+    return _scan_slope(path, r_skip)[1:]
+
+
+def _warn_clearance(path: SampledPath, tool: Tool, slope: float, k: int,
+                    stacklevel: int) -> float:
+    """Warn when ``atan(slope)`` exceeds the clearance; return that angle (rad).
+
+    ``k`` is the first sample of the steepest interval of ``path`` (-1: none).
+    """
     if k < 0:
         return 0.0
     rm = 0.5 * (path.r[k] + path.r[k + 1])
-    angle = math.atan(float(slope))
+    angle = math.atan(slope)
     if angle > tool.clearance_angle:
         warnings.warn(
             ToolpathWarning(
@@ -144,27 +170,37 @@ def _rect_polar(xmin, xmax, ymin, ymax, reach):
 
 def _crop(path: SampledPath, rmin: float, rmax: float, window, reach: float):
     """Keep the intervals that can cut the rectangle (both of their samples)."""
-    from ..kernels._prep import _crop_mask
+    from ..kernels._prep import _crop_mask_chunked
 
-    if path.n < 2:
-        return path
     keep = np.empty(path.n, dtype=np.bool_)
     if window is None:
         centre, lo, hi = 0.0, -math.pi, math.pi
     else:
         centre, lo, hi = window
     # allowances for rounding: 1 nm radially, 1 nrad in angle
-    count = _crop_mask(path.theta, path.r, rmin, rmax, reach + 1e-9, window is not None,
-                       centre, lo - 1e-9, hi + 1e-9, keep)
+    count = _crop_mask_chunked(path.theta, path.r, rmin, rmax, reach + 1e-9,
+                               window is not None, centre, lo - 1e-9, hi + 1e-9,
+                               _n_chunks(path.n), keep)
     if count > 0.8 * path.n:
         return path
     return path.select(keep)
 
 
+def _raise_path_error(path: SampledPath, code: int) -> None:
+    if code == 1:
+        raise ConfigError("path.theta, path.r and path.z must have finite values")
+    if code == 2:
+        raise ConfigError(
+            "path.theta must be strictly increasing (unwrapped angle, rad)")
+    if code == 3:
+        raise ConfigError(f"path.r must be >= 0 m, got min {path.r.min()!r}")
+
+
 def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
                  rows: tuple[int, int] | None = None,
                  cols: tuple[int, int] | None = None,
-                 crop: bool = True) -> PreparedPath | None:
+                 crop: bool = True, check: bool = False,
+                 stacklevel: int = 2) -> PreparedPath | None:
     """Crop a sampled path to what can cut a (sub-)field and build kernel inputs.
 
     Parameters
@@ -180,20 +216,47 @@ def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
     crop : bool, default: True
         Drop the samples that cannot touch the (sub-)field first. Skip it when the
         path was sampled for this field already (it changes speed, not results).
+    check : bool, default: False
+        Validate the path (finite, strictly increasing angle, r >= 0) and warn when
+        the slope along the cut of the cropped path exceeds the clearance angle
+        (:func:`check_clearance`). Every pass runs in parallel chunks.
+    stacklevel : int, default: 2
+        Passed to :func:`warnings.warn` for the clearance warning.
 
     Returns
     -------
     PreparedPath or None
         None when fewer than two samples can cut the field.
+
+    Raises
+    ------
+    ConfigError
+        With ``check``: on a non-finite or non-monotonic path or a negative radius.
     """
     rows = (0, field.ny) if rows is None else rows
     cols = (0, field.nx) if cols is None else cols
     reach = tool.half_width
     rect = _field_rect(field, rows, cols)
     rmin, rmax, window = _rect_polar(*rect, reach)
+    if check and not isinstance(path, SampledPath):
+        raise ConfigError(f"path must be a SampledPath, got {type(path).__name__}")
+    if check:
+        # validity and clearance slope in one pass; the slope is taken again over
+        # the cropped path when the crop removes samples
+        bad, slope, k = _scan_slope(path, tool.nose_radius)
+        if bad:
+            from ..kernels._prep import _check_path
+
+            _raise_path_error(path, int(_check_path(path.theta, path.r, path.z)))
+    if path.n < 2:
+        return None
     p = _crop(path, rmin, rmax, window, reach) if crop else path
     if p.n < 2:
         return None
+    if check:
+        if p is not path:
+            slope, k = _max_slope(p, tool.nose_radius)
+        _warn_clearance(p, tool, slope, k, stacklevel + 1)
     centre = 0.0 if window is None else window[0]
     # Bucket boundaries half a turn from the field centre, at or before theta[0].
     ref = centre - math.pi
@@ -201,21 +264,6 @@ def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
     if not (theta_ref <= p.theta[0]):  # rounding
         theta_ref = p.theta[0]
     return PreparedPath(p, theta_ref)
-
-
-def _validate_path(path: SampledPath) -> None:
-    from ..kernels._prep import _check_path
-
-    if not isinstance(path, SampledPath):
-        raise ConfigError(f"path must be a SampledPath, got {type(path).__name__}")
-    code = _check_path(path.theta, path.r, path.z)
-    if code == 1:
-        raise ConfigError("path.theta, path.r and path.z must have finite values")
-    if code == 2:
-        raise ConfigError(
-            "path.theta must be strictly increasing (unwrapped angle, rad)")
-    if code == 3:
-        raise ConfigError(f"path.r must be >= 0 m, got min {path.r.min()!r}")
 
 
 def _initial_array(initial, shape, rows, cols, field) -> np.ndarray:
@@ -337,9 +385,11 @@ def sweep(path: SampledPath, tool: Tool, field: Field, *,
         )
     shape = (rows[1] - rows[0], cols[1] - cols[0])
     out = _initial_array(initial, shape, rows, cols, field)
-    if check:
-        _validate_path(path)
-    prep = prepare_path(path, tool, field, rows=rows, cols=cols)
+    if not isinstance(path, SampledPath):
+        raise ConfigError(f"path must be a SampledPath, got {type(path).__name__}")
+    with _threads(n_threads):
+        prep = prepare_path(path, tool, field, rows=rows, cols=cols, check=check,
+                            stacklevel=3)
     meta = {
         "sweep": {
             "method": method,
@@ -356,8 +406,6 @@ def sweep(path: SampledPath, tool: Tool, field: Field, *,
     y0 = field.y0 + rows[0] * field.pitch_y
     if prep is None:
         return Surface(out, field.pitch_x, field.pitch_y, meta, x0, y0)
-    if check:
-        check_clearance(prep.path, tool, stacklevel=3)
     run_kernel(prep, tool, field, out, method=method, n_threads=n_threads,
                row0=rows[0], col0=cols[0])
     return Surface(out, field.pitch_x, field.pitch_y, meta, x0, y0)

@@ -1,0 +1,139 @@
+"""Path preparation kernels (checks, crop marks, slope, buckets) against plain numpy.
+
+The kernels run in parallel chunks; every test uses chunk counts that put chunk
+boundaries at awkward places (1, 3, 8, 64 chunks) and paths with gaps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import servosurf.toolpath as tp
+from servosurf.errors import ConfigError
+from servosurf.kernels._prep import _crop_mask_chunked, _scan_slope
+from servosurf.kernels._sweep import N_STAT, _bucket_stats
+
+try:  # tests/ on sys.path (rootdir-relative packages)
+    from reference import naive
+except ImportError:  # tests/ itself is a package
+    from tests.reference import naive
+
+CHUNKS = (1, 3, 8, 64)
+
+
+def wandering_path(rng, n=5000, turns=9.0, fs=1000.0, gaps=True):
+    """Irregular angle steps over several turns, radius crossing a band, gaps."""
+    steps = rng.uniform(0.1, 1.9, n)
+    theta = rng.uniform(-3, 3) + np.cumsum(steps) * (2 * np.pi * turns / steps.sum())
+    r = 2e-3 + 4e-5 * np.sin(np.linspace(0, 7, n)) + rng.normal(0, 1e-7, n)
+    z = 1e-6 * rng.standard_normal(n).cumsum() / math.sqrt(n)
+    k = np.arange(n, dtype=float)
+    if gaps:  # skip runs of samples: non-consecutive times
+        k += np.repeat(rng.integers(0, 3, n // 50).cumsum() * 40, 50)[:n]
+    return np.ascontiguousarray(k / fs), theta, r, z, fs
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("window", [None, (0.4, -0.05, 0.08), (3.1, -0.2, 0.0)])
+def test_crop_mask_matches_reference(seed, window):
+    rng = np.random.default_rng(seed)  # random path; results do not depend on it
+    t, theta, r, z, fs = wandering_path(rng)
+    rmin, rmax, reach = 1.99e-3, 2.01e-3, 5e-6
+    want, count = naive.crop_mask(theta, r, rmin, rmax, reach, window)
+    assert 0 < count < theta.size  # the case crops something and keeps something
+    centre, lo, hi = (0.0, -math.pi, math.pi) if window is None else window
+    for n_chunks in CHUNKS:
+        keep = np.ones(theta.size, dtype=bool)
+        got = _crop_mask_chunked(theta, r, rmin, rmax, reach, window is not None,
+                                 centre, lo, hi, n_chunks, keep)
+        np.testing.assert_array_equal(keep, want)
+        assert got == count
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_scan_slope_matches_reference(seed):
+    rng = np.random.default_rng(seed)
+    t, theta, r, z, fs = wandering_path(rng)
+    for r_skip in (0.0, 2.0e-3):  # 2 mm: skips about half of the intervals
+        want = naive.max_slope(t, theta, r, z, fs, r_skip)
+        for n_chunks in CHUNKS:
+            bad, slope, k = _scan_slope(t, theta, r, z, fs, r_skip, n_chunks,
+                                        np.empty((n_chunks, 2)))
+            assert not bad
+            assert (slope, k) == want
+
+
+@pytest.mark.parametrize("where", ["first", "boundary", "last"])
+@pytest.mark.parametrize("fault, message", [
+    ("nan_theta", "finite"), ("inf_r", "finite"), ("nan_z", "finite"),
+    ("repeat_theta", "strictly increasing"), ("negative_r", ">= 0 m"),
+])
+def test_path_faults_are_found_anywhere(where, fault, message):
+    rng = np.random.default_rng(3)
+    t, theta, r, z, fs = wandering_path(rng, n=40000, gaps=False)
+    theta, r, z = theta.copy(), r.copy(), z.copy()
+    n_chunks = 8
+    step = (t.size + n_chunks - 1) // n_chunks
+    i = {"first": 1, "boundary": 3 * step, "last": t.size - 1}[where]
+    if fault == "nan_theta":
+        theta[i] = np.nan
+    elif fault == "inf_r":
+        r[i] = np.inf
+    elif fault == "nan_z":
+        z[i] = np.nan
+    elif fault == "repeat_theta":
+        theta[i] = theta[i - 1]
+    else:
+        r[i] = -1e-9
+    bad = _scan_slope(t, theta, r, z, fs, 0.0, n_chunks, np.empty((n_chunks, 2)))[0]
+    assert bad
+    path = tp.SampledPath(t, theta, r, z, fs)
+    field = tp.Field(pitch_x=1e-6, pitch_y=1e-6, nx=3, ny=3, center_x=2e-3)
+    with pytest.raises(ConfigError, match=message):
+        tp.sweep(path, tp.Tool(), field)
+
+
+def test_bucket_ranges_match_reference():
+    rng = np.random.default_rng(4)
+    t, theta, r, z, fs = wandering_path(rng)
+    gap = np.zeros(theta.size, dtype=bool)
+    gap[np.flatnonzero(np.diff(t) > 1.5 / fs)] = True
+    theta_ref = theta[0] - 0.3
+    nb = int(math.floor((theta[-1] - theta_ref) / (2 * math.pi))) + 1
+    bidx = np.zeros((nb, 4), dtype=np.int64)
+    bstat = np.zeros((nb, N_STAT))
+    _bucket_stats(theta, r, z, gap, theta_ref, bidx, bstat)
+    first, end = naive.bucket_ranges(theta, theta_ref, nb)
+    n = theta.size
+    np.testing.assert_array_equal(bidx[:, 0], np.maximum(first - 1, 0))
+    np.testing.assert_array_equal(bidx[:, 1], np.minimum(end, n - 1))
+    for j in range(nb):  # bounds cover every sample that can bracket a crossing
+        lo, hi = bidx[j, 0], bidx[j, 1]
+        seg_r, seg_z = r[lo:hi + 1], z[lo:hi + 1]
+        assert bstat[j, 0] >= seg_r.min() and bstat[j, 1] <= seg_r.max()
+        assert bstat[j, 2] >= seg_z.min()
+        inner = slice(first[j], end[j])
+        if end[j] > first[j]:
+            assert bstat[j, 0] <= r[inner].min() and bstat[j, 1] >= r[inner].max()
+            assert bstat[j, 2] <= z[inner].min()
+
+
+def test_crop_mask_at_every_chunk_boundary_phase():
+    # radii in, out, out, out, in, ...: sample 1 of each period is kept through the
+    # interval before it, sample 3 through the one after it, sample 2 not at all;
+    # the chunk boundaries (1667, 3334 for 3 chunks; multiples of 625 for 8, of 79
+    # for 64) fall on every phase of the pattern
+    n = 5000
+    theta = np.linspace(0.0, 20.0, n)
+    r = np.where(np.arange(n) % 4 == 0, 2e-3, 3e-3)
+    want, count = naive.crop_mask(theta, r, 1.99e-3, 2.01e-3, 5e-6)
+    assert 0 < count < n
+    for n_chunks in CHUNKS:
+        keep = np.zeros(n, dtype=bool)
+        got = _crop_mask_chunked(theta, r, 1.99e-3, 2.01e-3, 5e-6, False, 0.0,
+                                 -math.pi, math.pi, n_chunks, keep)
+        np.testing.assert_array_equal(keep, want)
+        assert got == count
