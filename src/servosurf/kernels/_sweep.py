@@ -370,15 +370,16 @@ def _envelope_exhaustive(phi, rq, h0, theta, pts, bidx, bstat, theta_ref, radius
 
 
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
-def _start_bucket(rq, bstat, direction, hint):  # pragma: no cover - numba
+def _start_bucket(rq, rmid, direction, hint):  # pragma: no cover - numba
     """Bucket whose mid radius is nearest to ``rq``, walking from ``hint``.
 
     Parameters
     ----------
     rq : float
         Query radius, in m.
-    bstat : ndarray of shape (n_buckets, N_STAT)
-        Bucket statistics.
+    rmid : ndarray of shape (n_buckets,)
+        Mid radius of every bucket (column ``RMID`` of the bucket statistics,
+        contiguous), in m.
     direction : int
         +1 / -1 when bucket mid radii increase / decrease, 0 when not monotone.
     hint : int
@@ -389,7 +390,7 @@ def _start_bucket(rq, bstat, direction, hint):  # pragma: no cover - numba
     int
         Start bucket (any bucket is correct; a near one prunes best).
     """
-    nb = bstat.shape[0]
+    nb = rmid.size
     if direction == 0:
         return 0
     j = hint
@@ -398,15 +399,15 @@ def _start_bucket(rq, bstat, direction, hint):  # pragma: no cover - numba
         hi = nb
         while lo < hi:  # first bucket on the far side of rq
             mid = (lo + hi) >> 1
-            v = bstat[mid, RMID]
+            v = rmid[mid]
             if (direction < 0 and v > rq) or (direction > 0 and v < rq):
                 lo = mid + 1
             else:
                 hi = mid
         j = lo if lo < nb else nb - 1
-    while j + 1 < nb and abs(bstat[j + 1, RMID] - rq) < abs(bstat[j, RMID] - rq):
+    while j + 1 < nb and abs(rmid[j + 1] - rq) < abs(rmid[j] - rq):
         j += 1
-    while j > 0 and abs(bstat[j - 1, RMID] - rq) < abs(bstat[j, RMID] - rq):
+    while j > 0 and abs(rmid[j - 1] - rq) < abs(rmid[j] - rq):
         j -= 1
     return j
 
@@ -434,8 +435,10 @@ def _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width, wav,
         beyond the arc's reach.
     """
     target = phi + TWO_PI * (m0 + j)
-    if target < theta[0] or target > theta[theta.size - 1]:
-        return np.inf
+    # common case first: inside the bucket's sample range, hence inside the path
+    if not (target >= bstat[j, TH_LO] and target < bstat[j, TH_HI]):
+        if target < theta[0] or target > theta[theta.size - 1]:
+            return np.inf
     i = _locate_guided(theta, pts, target, j, bidx, bstat)
     return _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0, wav_inv_ds)
 
@@ -642,7 +645,7 @@ def _sweep_exhaustive(theta, pts, bidx, bstat, theta_ref, radius, half_width,
 
 
 @njit(parallel=True, nogil=True, cache=CACHE, fastmath=FASTMATH)
-def _sweep_pruned(theta, pts, bidx, bstat, theta_ref, radius, half_width, wav,
+def _sweep_pruned(theta, pts, bidx, bstat, rmid, theta_ref, radius, half_width, wav,
                   wav_s0, wav_inv_ds, wav_bound, slack, mirror_rmax, direction, x0, dx,
                   col0, y0, dy, row0, out):  # pragma: no cover - numba
     """Lower envelope of the swept arc on a grid, pruned by per-revolution bounds.
@@ -652,6 +655,8 @@ def _sweep_pruned(theta, pts, bidx, bstat, theta_ref, radius, half_width, wav,
     theta, pts, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
     wav_inv_ds, wav_bound, slack, mirror_rmax, x0, dx, col0, y0, dy, row0, out
         As for :func:`_sweep_exhaustive`.
+    rmid : ndarray of shape (n_buckets,)
+        Contiguous copy of the bucket mid radii ``bstat[:, RMID]``, in m.
     direction : int
         +1 / -1 when bucket mid radii increase / decrease with the bucket index, 0
         otherwise (still exact, but without ordering the walk prunes less).
@@ -683,7 +688,7 @@ def _sweep_pruned(theta, pts, bidx, bstat, theta_ref, radius, half_width, wav,
         # Stage 2: start bucket (nearest mid radius), walking along the row.
         hint = -1
         for col in range(nx):
-            hint = _start_bucket(rps[col], bstat, direction, hint)
+            hint = _start_bucket(rps[col], rmid, direction, hint)
             j0s[col] = hint
         # Stage 3: the start bucket's crossing, with no data-dependent branches
         # between points so that the CPU overlaps consecutive points.
@@ -707,7 +712,7 @@ def _sweep_pruned(theta, pts, bidx, bstat, theta_ref, radius, half_width, wav,
             if rp <= mirror_rmax:
                 phm = phi + np.pi
                 m0m = np.ceil((theta_ref - phm) / TWO_PI)
-                hint_m = _start_bucket(-rp, bstat, direction, hint_m)
+                hint_m = _start_bucket(-rp, rmid, direction, hint_m)
                 h = _crossing(hint_m, phm, m0m, -rp, theta, pts, bidx, bstat, radius,
                               half_width, wav, wav_s0, wav_inv_ds)
                 if h < best:

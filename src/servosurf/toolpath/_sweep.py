@@ -128,7 +128,8 @@ class PreparedPath:
         self.bstat = np.zeros((nb, N_STAT), dtype=np.float64)
         _bucket_stats(self.theta, self.r, self.z, self.gap, self.theta_ref, self.bidx,
                       self.bstat)
-        d = np.diff(self.bstat[:, RMID])
+        self.rmid = np.ascontiguousarray(self.bstat[:, RMID])
+        d = np.diff(self.rmid)
         if np.all(d <= 0):
             self.direction = -1
         elif np.all(d >= 0):
@@ -443,7 +444,7 @@ def run_kernel(prep: PreparedPath, tool: Tool, field: Field, out: np.ndarray, *,
     mirror_rmax = hw - prep.rmin
     with _threads(n_threads):
         if method == "pruned":
-            _sweep_pruned(prep.theta, prep.pts, prep.bidx, prep.bstat,
+            _sweep_pruned(prep.theta, prep.pts, prep.bidx, prep.bstat, prep.rmid,
                           prep.theta_ref, R, hw, wav, s0, 1.0 / ds, wav_bound, slack,
                           mirror_rmax, prep.direction, field.x0, field.pitch_x,
                           col0, field.y0, field.pitch_y, row0, out)
