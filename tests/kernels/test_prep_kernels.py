@@ -137,3 +137,38 @@ def test_crop_mask_at_every_chunk_boundary_phase():
                                  -math.pi, math.pi, n_chunks, keep)
         np.testing.assert_array_equal(keep, want)
         assert got == count
+
+
+@pytest.mark.parametrize("stride", [1, 7, 64])
+def test_hit_fraction_matches_reference(stride):
+    from servosurf.kernels._prep import _hit_fraction
+
+    rng = np.random.default_rng(5)
+    t, theta, r, z, fs = wandering_path(rng)
+    window = (0.4, -0.05, 0.08)
+    rmin, rmax, reach = 1.99e-3, 2.01e-3, 5e-6
+    rl = np.minimum(r[:-1], r[1:])[::stride]
+    rh = np.maximum(r[:-1], r[1:])[::stride]
+    rel = np.mod(theta[:-1] - 0.4 + np.pi, 2 * np.pi)[::stride] - np.pi
+    dth = np.diff(theta)[::stride]
+    hit = (((rl <= rmax + reach) & (rh >= rmin - reach)) | (rl <= reach - rmin)) & (
+        ((rel <= 0.08) & (rel + dth >= -0.05)) | (rel - 2 * np.pi + dth >= -0.05)
+        | (dth >= 2 * np.pi))
+    got = _hit_fraction(theta, r, stride, rmin, rmax, reach, True, *window)
+    assert 0.0 < got < 1.0
+    assert got == hit.mean()
+
+
+def test_uniform_initial_equals_the_same_initial_array():
+    # a scalar pre-cut height is written by the kernel row by row; an array is
+    # read from the output: both give the same map, bit for bit
+    rng = np.random.default_rng(6)
+    t, theta, r, z, fs = wandering_path(rng, gaps=False)
+    path = tp.SampledPath(t, theta, r, z - 2e-6, fs)
+    field = tp.Field(pitch_x=2e-6, pitch_y=2e-6, nx=24, ny=20, center_x=2e-3)
+    tool = tp.Tool(clearance_angle=math.pi / 2)
+    for v in (0.0, -1e-6, np.inf):
+        a = tp.sweep(path, tool, field, initial=v).z
+        b = tp.sweep(path, tool, field, initial=np.full(field.shape, v)).z
+        np.testing.assert_array_equal(a, b)
+        assert np.isfinite(a).any()  # the path cuts the field

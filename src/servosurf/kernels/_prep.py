@@ -14,6 +14,7 @@ __all__ = [
     "_check_path",
     "_scan_slope",
     "_crop_mask_chunked",
+    "_hit_fraction",
     "_interleave",
 ]
 
@@ -265,3 +266,31 @@ def _crop_mask_chunked(theta, r, rmin, rmax, reach, has_window, centre, lo, hi,
         counts[c] = _chunk_keep(theta[p0:q], r[p0:q], rmin, rmax, reach, has_window,
                                 centre, lo, hi, s - p0, keep[s:e])
     return counts.sum()
+
+
+@njit(cache=CACHE, fastmath=FASTMATH)
+def _hit_fraction(theta, r, stride, rmin, rmax, reach, has_window, centre, lo,
+                  hi):  # pragma: no cover - numba
+    """Fraction of every ``stride``-th interval that can cut the rectangle.
+
+    Parameters
+    ----------
+    theta, r : ndarray of shape (n,)
+        Angle (rad) and radius (m); n >= 2.
+    stride : int
+        Test intervals 0, stride, 2 stride, ...
+    rmin, rmax, reach, has_window, centre, lo, hi
+        As for :func:`_crop_mask_chunked` (m, rad).
+
+    Returns
+    -------
+    float
+        Share of the tested intervals that hit, in [0, 1].
+    """
+    hits = 0
+    tested = 0
+    for i in range(0, theta.size - 1, stride):
+        hits += _interval_hits(theta, r, i, rmin, rmax, reach, has_window, centre, lo,
+                               hi)
+        tested += 1
+    return hits / tested

@@ -647,19 +647,25 @@ def _sweep_exhaustive(theta, pts, bidx, bstat, theta_ref, radius, half_width,
 @njit(parallel=True, nogil=True, cache=CACHE, fastmath=FASTMATH)
 def _sweep_pruned(theta, pts, bidx, bstat, rmid, theta_ref, radius, half_width, wav,
                   wav_s0, wav_inv_ds, wav_bound, slack, mirror_rmax, direction, x0, dx,
-                  col0, y0, dy, row0, out):  # pragma: no cover - numba
+                  col0, y0, dy, row0, has_fill, fill, out):  # pragma: no cover - numba
     """Lower envelope of the swept arc on a grid, pruned by per-revolution bounds.
 
     Parameters
     ----------
     theta, pts, bidx, bstat, theta_ref, radius, half_width, wav, wav_s0,
     wav_inv_ds, wav_bound, slack, mirror_rmax, x0, dx, col0, y0, dy, row0, out
-        As for :func:`_sweep_exhaustive`.
+        As for :func:`_sweep_exhaustive` (``out`` is only written when
+        ``has_fill``).
     rmid : ndarray of shape (n_buckets,)
         Contiguous copy of the bucket mid radii ``bstat[:, RMID]``, in m.
     direction : int
         +1 / -1 when bucket mid radii increase / decrease with the bucket index, 0
         otherwise (still exact, but without ordering the walk prunes less).
+    has_fill : bool
+        Write ``fill`` into each row of ``out`` before computing it (a uniform
+        pre-cut height), instead of reading the pre-cut heights from ``out``.
+    fill : float
+        That height, in m (+inf: no material limit).
 
     Notes
     -----
@@ -681,6 +687,9 @@ def _sweep_pruned(theta, pts, bidx, bstat, rmid, theta_ref, radius, half_width, 
         phis = np.empty(nx)
         m0s = np.empty(nx)
         j0s = np.empty(nx, dtype=np.int64)
+        if has_fill:  # uniform pre-cut height: written here, in cache
+            for col in range(nx):
+                out[row, col] = fill
         # Stage 1: polar coordinates and the revolution number of bucket 0.
         _row_polar(y, x0, dx, col0, rps, phis)
         for col in range(nx):
