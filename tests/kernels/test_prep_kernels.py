@@ -167,8 +167,12 @@ def test_uniform_initial_equals_the_same_initial_array():
     path = tp.SampledPath(t, theta, r, z - 2e-6, fs)
     field = tp.Field(pitch_x=2e-6, pitch_y=2e-6, nx=24, ny=20, center_x=2e-3)
     tool = tp.Tool(clearance_angle=math.pi / 2)
-    for v in (0.0, -1e-6, np.inf):
+    cut = tp.sweep(path, tool, field, initial=np.inf).z
+    assert np.isfinite(cut).all()  # the path reaches every pixel
+    level = float(np.median(cut))  # about half the pixels stay at this level
+    for v in (0.0, level, np.inf):
         a = tp.sweep(path, tool, field, initial=v).z
         b = tp.sweep(path, tool, field, initial=np.full(field.shape, v)).z
         np.testing.assert_array_equal(a, b)
-        assert np.isfinite(a).any()  # the path cuts the field
+    a = tp.sweep(path, tool, field, initial=level).z
+    assert 0 < np.count_nonzero(a == level) < a.size
