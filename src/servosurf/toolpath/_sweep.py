@@ -254,9 +254,10 @@ def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
     reach = tool.half_width
     rect = _field_rect(field, rows, cols)
     rmin, rmax, window = _rect_polar(*rect, reach)
-    if check and not isinstance(path, SampledPath):
-        raise ConfigError(f"path must be a SampledPath, got {type(path).__name__}")
     if check:
+        if not isinstance(path, SampledPath):
+            raise ConfigError(
+                f"path must be a SampledPath, got {type(path).__name__}")
         # validity and clearance slope in one pass; the slope is taken again over
         # the cropped path when the crop removes samples
         bad, slope, k = _scan_slope(path, tool.nose_radius)
