@@ -6,6 +6,7 @@ Usage::
     python benchmarks/discovery/run.py --quick    # 22 cases on the short campaign
     python benchmarks/discovery/run.py --json     # JSON summary on stdout
     python benchmarks/discovery/run.py --out DIR --jobs 2 --keep
+    python benchmarks/discovery/run.py --nulls 40 --seed 7   # threshold calibration
 
 Steps (each case is diagnosed from its manifest and recordings only):
 
@@ -84,6 +85,44 @@ def diagnose_all(out: Path, jobs: int = 2, progress=True) -> None:
                 print(f"[{i + 1}/{len(work)}]", file=sys.stderr, flush=True)
 
 
+def null_calibration(a) -> int:
+    """Diagnose ``a.nulls`` fresh null cases; print their best candidate scores.
+
+    A selection threshold read from these (for a stated false-alarm rate) is
+    calibrated on data the blind suite never sees; the suite is then run with
+    another seed to validate it.
+    """
+    import collections
+
+    import generate
+
+    out = Path(a.out or f"results/discovery-nulls-{a.seed}")
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / "key.sealed").exists():
+        print(f"generating {a.nulls} null cases in {out} ...", file=sys.stderr)
+        generate.generate_specs(
+            out,
+            [{"effects": [], "ool": None, "enr": 0.0}] * a.nulls,
+            campaign="full",
+            seed=a.seed,
+            jobs=a.jobs,
+        )
+    diagnose_all(out, jobs=a.jobs)
+    res = [json.loads(f.read_text()) for f in sorted((out / "results").glob("*.json"))]
+    scores = sorted(r["ranking"][0]["score"] for r in res if r.get("ranking"))
+    summary = {
+        "cases": len(res),
+        "verdicts": dict(collections.Counter(r.get("verdict", "error") for r in res)),
+        "best_scores": scores,
+        "max": scores[-1] if scores else None,
+    }
+    (out / "nulls.json").write_text(json.dumps(summary, indent=2))
+    if not a.keep:
+        shutil.rmtree(out / "cases", ignore_errors=True)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="22 cases, short campaign")
@@ -95,8 +134,17 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1, help="suite seed")
     ap.add_argument("--keep", action="store_true", help="keep the recordings")
     ap.add_argument("--limit", type=int, help="only the first N cases")
+    ap.add_argument(
+        "--nulls",
+        type=int,
+        metavar="N",
+        help="calibration only: N null cases of the full campaign (use a --seed "
+        "other than the suite's); prints the best candidate score of each",
+    )
     a = ap.parse_args(argv)
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    if a.nulls:
+        return null_calibration(a)
     out = Path(a.out or ("results/discovery-quick" if a.quick else "results/discovery"))
     out.mkdir(parents=True, exist_ok=True)
     import generate

@@ -188,6 +188,12 @@ def score(out: Path) -> dict:
             fit_after=r.get("fit_after_percent"),
             unexplained=r.get("unexplained_power_fraction"),
         )
+        rk = r.get("ranking") or []
+        row["top_score"] = rk[0]["score"] if rk else None
+        if len(k["effects"]) == 1:
+            ranks = [i for i, c in enumerate(rk) if c["effect"] == k["effects"][0]]
+            row["true_rank"] = ranks[0] if ranks else None
+            row["true_score"] = rk[ranks[0]]["score"] if ranks else None
         if len(k["effects"]) == 1 and ex and ex[0]["effect"] == k["effects"][0]:
             e = k["effects"][0]
             row["param_error"] = param_error(e, k["truth"][e], ex[0]["parameters"], nom)
@@ -202,6 +208,27 @@ def score(out: Path) -> dict:
 def _rate(rows, pred):
     rows = list(rows)
     return (sum(1 for r in rows if pred(r)) / len(rows)) if rows else float("nan")
+
+
+def detection_margin(null: list[dict], single: list[dict]) -> dict:
+    """Where the selection threshold (score > 0) sits against the data.
+
+    The best candidate score of every null case (its distribution is what a
+    calibrated threshold would be read from), and the single-effect cases called
+    ``consistent`` whose true effect was nevertheless ranked first, with its score
+    (a lower threshold above the null scores would have found them).
+    """
+    ns = sorted(r["top_score"] for r in null if r.get("top_score") is not None)
+    missed = [
+        {"effect": r["effects"][0], "enr": r["enr"], "score": r["true_score"]}
+        for r in single
+        if r["verdict"] == "consistent" and r.get("true_rank") == 0
+    ]
+    return {
+        "null_top_scores": ns,
+        "null_top_score_max": ns[-1] if ns else None,
+        "missed_true_first": sorted(missed, key=lambda m: -m["score"]),
+    }
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -315,6 +342,7 @@ def summarise(rows: list[dict]) -> dict:
         for r in single
         if not top1(r)
     ]
+    out["detection_margin"] = detection_margin(null, single)
     out["targets"] = {
         k: {
             "target": v,
@@ -381,6 +409,18 @@ def table(s: dict) -> str:
         lines.append(
             f"not generated (not scored): {g['case']} {g['effects'] or g['ool']} "
             f"ENR {g['enr']}: {g['generation_error']}"
+        )
+    dm = s.get("detection_margin")
+    if dm and dm["null_top_scores"]:
+        n_null = len(dm["null_top_scores"])
+        lines.append(
+            f"detection margin: best candidate score on the {n_null}"
+            f" null cases {dm['null_top_scores'][0]:.1f} .. "
+            f"{dm['null_top_score_max']:.1f} (accepted above 0); "
+            f"{len(dm['missed_true_first'])} single-effect cases called consistent "
+            "ranked the true effect first, scores "
+            + ", ".join(f"{m['score']:.1f} ({m['effect']} @ {m['enr']})"
+                        for m in dm["missed_true_first"])
         )
     lines.append("")
     lines.append("| ENR | n | detection | top-1 | median parameter error |")
