@@ -90,6 +90,9 @@ def test_noise_writes_figures_and_summary(tmp_path, capsys):
         (["noise", "--mass", "-1"], "--mass"),
         (["noise", "--disturbances", "nope"], "unknown disturbance calibration"),
         (["paper", "--only", "nope"], "unknown group"),
+        # nothing listens on port 1 of this machine: connection refused
+        (["noise", "--scheduler", "tcp://127.0.0.1:1"], "no dask scheduler"),
+        (["noise", "--scheduler", "local", "--workers", "0"], "--workers"),
     ],
 )
 def test_user_errors_one_line(argv, match, capsys, tmp_path):

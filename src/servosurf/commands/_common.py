@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -51,3 +52,55 @@ def out_dir(path: str | Path) -> Path:
         raise ConfigError(f"--out {p}: exists and is not a directory")
     p.mkdir(parents=True, exist_ok=True)
     return p
+
+
+def add_scheduler_args(p, what: str) -> None:
+    """``--scheduler`` and ``--workers`` options of a command that runs ``what``."""
+    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help=f"run {what} on dask: a scheduler address, or 'local' for a "
+                   "LocalCluster of --workers processes (default: in this process)")
+    p.add_argument("--workers", metavar="N", type=int, default=2,
+                   help="worker processes of the local cluster (default 2)")
+
+
+@contextmanager
+def dask_client(scheduler: str | None, workers: int = 2):
+    """A dask client for ``--scheduler`` (None: yields None, run in this process).
+
+    ``"local"`` starts a LocalCluster of ``workers`` single-threaded processes,
+    anything else is a scheduler address. A missing ``distributed`` package or an
+    unreachable scheduler is a :class:`ConfigError` naming the value.
+    """
+    from ..errors import ConfigError
+
+    if not scheduler:
+        yield None
+        return
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ConfigError(
+            "--scheduler needs dask distributed: pip install 'servosurf[scale]'"
+        ) from None
+    if scheduler == "local":
+        if workers < 1:
+            raise ConfigError(f"--workers must be >= 1, got {workers}")
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                               processes=True, dashboard_address=None)
+        client = Client(cluster)
+    else:
+        cluster = None
+        try:
+            client = Client(scheduler, timeout="5s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ConfigError(
+                f"--scheduler {scheduler!r}: no dask scheduler reachable there "
+                f"({type(exc).__name__}); give host:port of a running scheduler, "
+                "or 'local'"
+            ) from None
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import add_scheduler_args
+
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -34,11 +36,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                    help="moving mass in kg (default 0.175)")
     p.add_argument("--seed", metavar="N", type=int, default=0, help="vibration seed")
     p.add_argument("--no-vibration", action="store_true", help="kinematic surface only")
-    p.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                   help="dask scheduler address, or 'local' for a LocalCluster "
-                   "(default: run in this process)")
-    p.add_argument("--workers", metavar="N", type=int, default=2,
-                   help="worker processes of the local cluster (default 2)")
+    add_scheduler_args(p, "the tiles (one task per tile)")
     p.add_argument("--out", metavar="DIR", default="results/face",
                    help="output directory")
     p.add_argument("--json", action="store_true", help="print the JSON summary")
@@ -57,7 +55,7 @@ def run(args) -> int:
     from ..servo import ServoLoop, load_machine
     from ..toolpath import load_toolpath
     from ..viz._surface_plots import plot_map
-    from ._common import out_dir, print_json, write_json
+    from ._common import dask_client, out_dir, print_json, write_json
 
     for name in ("radius", "pitch"):
         v = getattr(args, name)
@@ -97,28 +95,13 @@ def run(args) -> int:
     store = out / "face.zarr"
     if store.exists():
         shutil.rmtree(store)
-    client = None
-    cluster = None
     if args.scheduler:
-        from distributed import Client, LocalCluster
-
-        if args.scheduler == "local":
-            cluster = LocalCluster(n_workers=args.workers, threads_per_worker=1,
-                                   processes=True, dashboard_address=None)
-            client = Client(cluster)
-        else:
-            client = Client(args.scheduler)
         summary["scheduler"] = args.scheduler
-    try:
-        with stage(f"face {field.ny} x {field.nx} px in {args.chunk}-px tiles"):
-            res = simulate_face(spec, str(store), field=field, face_radius=args.radius,
-                                chunk=(args.chunk, args.chunk), deviation=deviation,
-                                client=client)
-    finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+    with dask_client(args.scheduler, args.workers) as client, \
+            stage(f"face {field.ny} x {field.nx} px in {args.chunk}-px tiles"):
+        res = simulate_face(spec, str(store), field=field, face_radius=args.radius,
+                            chunk=(args.chunk, args.chunk), deviation=deviation,
+                            client=client)
     summary.update(seconds=res.seconds, points=res.n_points,
                    points_per_s=res.points_per_s, tasks=res.n_tasks,
                    path_samples=res.n_samples, zarr=str(store))

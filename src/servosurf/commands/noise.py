@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import add_scheduler_args
+
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -52,6 +54,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         default="results/noise",
         help="output directory (default results/noise)",
     )
+    add_scheduler_args(p, "the design study (one task per mass)")
     p.add_argument(
         "--json", action="store_true", help="print the JSON summary on stdout"
     )
@@ -66,7 +69,7 @@ def run(args) -> int:
     from ..noise import design_study, frequency_grid, synthesize
     from ..servo import ServoLoop, load_machine
     from ..viz import _servo_plots as vz
-    from ._common import out_dir, print_json, write_json
+    from ._common import dask_client, out_dir, print_json, write_json
 
     machine = load_machine(args.machine)
     if args.disturbances:
@@ -120,10 +123,17 @@ def run(args) -> int:
                     real_peaks_hz=b.peaks(),
                 )
             summary["masses"].append(entry)
-    with stage("RMS against bandwidth (design study)"):
+    with dask_client(args.scheduler, args.workers) as client, \
+            stage("RMS against bandwidth (design study)"):
         study = design_study(
-            machine, masses, grid, progress=lambda it: bar(it, desc="masses")
+            machine,
+            masses,
+            grid,
+            progress=lambda it, total=None: bar(it, total=total, desc="masses"),
+            client=client,
         )
+    if args.scheduler:
+        summary["scheduler"] = args.scheduler
     summary["study"] = study.to_dict()
     shares_bw = {"sensor_noise": [], "current_noise": [], "base_vibration": []}
     with stage("power shares against bandwidth"):

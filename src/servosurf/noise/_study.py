@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -171,6 +172,7 @@ def design_study(
     *,
     disturbances: Disturbances | None = None,
     progress=None,
+    client=None,
 ) -> DesignStudy:
     """RMS real and following error against bandwidth for a list of moving masses.
 
@@ -185,33 +187,46 @@ def design_study(
     disturbances : Disturbances, optional
         Default: the machine's active calibration.
     progress : callable, optional
-        Wraps the mass iterable (e.g. a progress bar).
+        Wraps the iterable of finished masses, called as ``progress(it, total=n)``
+        (e.g. a progress bar).
+    client : distributed.Client, optional
+        Run one dask task per mass on this cluster (same results as in-process);
+        default: in this process.
 
     Returns
     -------
     DesignStudy
         The grid, the optimum per mass and the stability limit per mass.
     """
+    from ..scale._tasks import map_tasks
+
     masses = np.atleast_1d(np.asarray(masses, dtype=float))
     bws = np.atleast_1d(np.asarray(bandwidths, dtype=float))
     freq = frequency_grid(machine.controller.sample_rate, n=2000)
-    rr = np.full((masses.size, bws.size), np.nan)
-    rf = np.full_like(rr, np.nan)
-    opt = np.full(masses.size, np.nan)
-    optv = np.full(masses.size, np.nan)
-    lim = np.full(masses.size, np.nan)
-    it = range(masses.size)
-    if progress is not None:
-        it = progress(it)
-    for i in it:
-        m = machine.with_moving_mass(masses[i])
-        for j, b in enumerate(bws):
-            rr[i, j], rf[i, j], _ = rms_at(m, b, disturbances=disturbances, freq=freq)
-        lim[i] = stability_limit(m)
-        try:
-            opt[i], optv[i] = optimal_bandwidth(
-                m, hi=0.999 * lim[i], disturbances=disturbances, freq=freq
-            )
-        except ModelError:
-            pass
+    task = functools.partial(_mass_row, machine, bws, disturbances, freq)
+    rows = map_tasks(task, [float(m) for m in masses], client=client,
+                     progress=progress)
+    rr = np.array([r[0] for r in rows]).reshape(masses.size, bws.size)
+    rf = np.array([r[1] for r in rows]).reshape(masses.size, bws.size)
+    opt, optv, lim = (np.array([r[k] for r in rows], dtype=float) for k in (2, 3, 4))
     return DesignStudy(masses, bws, rr, rf, opt, optv, lim)
+
+
+def _mass_row(machine: Machine, bws: np.ndarray, disturbances, freq: np.ndarray,
+              mass: float):
+    """One mass of :func:`design_study` (one task): RMS real and following error
+    at every bandwidth (m), optimal bandwidth (Hz), its RMS (m), stability limit (Hz).
+    """
+    m = machine.with_moving_mass(mass)
+    rr = np.full(bws.size, np.nan)
+    rf = np.full(bws.size, np.nan)
+    for j, b in enumerate(bws):
+        rr[j], rf[j], _ = rms_at(m, b, disturbances=disturbances, freq=freq)
+    lim = stability_limit(m)
+    opt = optv = np.nan
+    try:
+        opt, optv = optimal_bandwidth(m, hi=0.999 * lim, disturbances=disturbances,
+                                      freq=freq)
+    except ModelError:
+        pass
+    return rr, rf, opt, optv, lim

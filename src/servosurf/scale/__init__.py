@@ -1,4 +1,4 @@
-"""Whole-workpiece runs: tiling, chunked Zarr output and dask execution.
+"""Whole-workpiece runs and many-task studies: tiling, chunked Zarr output, dask.
 
 Needs the ``scale`` extra (``zarr``, ``dask[distributed]``), imported on use.
 """
@@ -14,6 +14,7 @@ from ._face import (
     simulate_face,
 )
 from ._memory import reuse_freed_memory
+from ._tasks import map_tasks
 from ._vibration import MemmapDeviation, write_vibration
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "FaceResult",
     "IndexNoise",
     "reuse_freed_memory",
+    "map_tasks",
     "MemmapDeviation",
     "write_vibration",
 ]
