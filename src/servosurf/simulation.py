@@ -46,7 +46,14 @@ from .metrology._surface import Surface
 from .servo._loop import ServoLoop
 from .servo._machine import Machine, load_machine
 
-__all__ = ["simulate", "SimulationResult", "PARTS", "SETTLE_TIME"]
+__all__ = [
+    "simulate",
+    "SimulationResult",
+    "realisation_study",
+    "RealisationStudy",
+    "PARTS",
+    "SETTLE_TIME",
+]
 
 #: Deviation parts that can be switched on and off.
 PARTS = ("tracking", "force", "vibration")
@@ -339,3 +346,129 @@ def simulate(
         workpiece=workpiece,
         settings=settings,
     )
+
+
+#: Scalar metrics of :func:`realisation_study`, each in SI (m, s, N).
+REALISATION_METRICS = (
+    "form_error_max_m",
+    "form_error_rms_m",
+    "ra_m",
+    "sa_m",
+    "sq_m",
+    "deviation_max_m",
+    "deviation_overshoot_m",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class RealisationStudy:
+    """Metrics of one simulation per seed of the vibration realisation.
+
+    Attributes
+    ----------
+    seeds : ndarray of int64, shape (k,)
+        The seeds, one realisation each.
+    metrics : dict of str to ndarray of shape (k,)
+        Per seed, the scalar metrics of :data:`REALISATION_METRICS` (SI; NaN where
+        the analysis has none, e.g. no form error on a flat face) and
+        ``peak1_per_m`` / ``peak2_per_m``, the two strongest spectral peaks (1/m).
+    """
+
+    seeds: np.ndarray
+    metrics: dict
+
+    def statistics(self) -> dict:
+        """Per metric: mean, standard deviation (ddof=1), min, 5th/50th/95th
+        percentile and max over the realisations, in the metric's SI unit."""
+        out = {}
+        for k, v in self.metrics.items():
+            v = v[np.isfinite(v)]
+            if v.size == 0:
+                continue
+            out[k] = {
+                "mean": float(v.mean()),
+                "std": float(v.std(ddof=1)) if v.size > 1 else 0.0,
+                "min": float(v.min()),
+                "p5": float(np.percentile(v, 5)),
+                "median": float(np.median(v)),
+                "p95": float(np.percentile(v, 95)),
+                "max": float(v.max()),
+            }
+        return out
+
+    def to_dict(self) -> dict:
+        """JSON-ready dictionary (SI units)."""
+        return {
+            "seeds": self.seeds.tolist(),
+            "realisations": {k: v.tolist() for k, v in self.metrics.items()},
+            "statistics": self.statistics(),
+        }
+
+
+def _realisation_metrics(toolpath, kwargs: dict, seed: int) -> dict:
+    """One task of :func:`realisation_study`: simulate with ``seed``, analyse."""
+    from .report._simulation import analyse
+
+    quiet = _progress.is_quiet()
+    _progress.set_quiet(True)
+    try:
+        res = simulate(toolpath, seed=int(seed), **kwargs)
+        summary = analyse(res)
+    finally:
+        _progress.set_quiet(quiet)
+    out = {}
+    for k in REALISATION_METRICS:
+        v = summary.get(k)
+        out[k] = float("nan") if v is None else float(v)
+    peaks = list(summary.get("spectrum_peaks_per_m") or [])
+    for i in (0, 1):
+        out[f"peak{i + 1}_per_m"] = float(peaks[i]) if len(peaks) > i else float("nan")
+    return out
+
+
+def realisation_study(toolpath, *, seeds: Sequence[int], client=None, progress=None,
+                      **kwargs) -> RealisationStudy:
+    """Simulate once per seed of the vibration realisation and collect the metrics.
+
+    Parameters
+    ----------
+    toolpath : ToolpathSpec, str or Path
+        As for :func:`simulate` (a path is read once, here).
+    seeds : sequence of int
+        Seeds (>= 0) of the vibration realisation and the instrument noise.
+    client : distributed.Client, optional
+        One dask task per seed on this cluster (the same values as in-process);
+        default: in this process.
+    progress : callable, optional
+        Wraps the finished realisations, called as ``progress(it, total=k)``.
+    **kwargs
+        Passed to :func:`simulate` (machine, workpiece, bandwidth, mass, parts,
+        instrument, ...), except ``seed``.
+
+    Returns
+    -------
+    RealisationStudy
+        Per-seed metrics and their statistics: how much the form error, Ra/Sa
+        and the spectral peaks vary from one vibration realisation to the next.
+
+    Raises
+    ------
+    ConfigError
+        On an empty or invalid seed list, or what :func:`simulate` raises.
+    """
+    import functools
+
+    from .scale._tasks import map_tasks
+    from .toolpath import ToolpathSpec, load_toolpath
+
+    if "seed" in kwargs:
+        raise ConfigError("realisation_study takes seeds=, not seed=")
+    seeds = [int(s) for s in seeds]
+    if not seeds or min(seeds) < 0:
+        raise ConfigError(
+            f"seeds must be a non-empty list of integers >= 0, got {seeds}")
+    spec = toolpath if isinstance(toolpath, ToolpathSpec) else load_toolpath(toolpath)
+    task = functools.partial(_realisation_metrics, spec, kwargs)
+    rows = map_tasks(task, seeds, client=client, progress=progress)
+    metrics = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0]}
+    return RealisationStudy(np.array(seeds, dtype=np.int64), metrics)

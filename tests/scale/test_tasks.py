@@ -68,3 +68,19 @@ def test_design_study_on_workers_equals_one_process(client):
     # the study itself: the heavier set-up has the lower optimum (seed paper 3.3)
     assert local.optimal_bandwidth[1] < local.optimal_bandwidth[0]
     assert np.all(np.isfinite(local.rms_real))
+
+
+def test_realisations_on_workers_equal_one_process(client):
+    import dataclasses
+
+    import servosurf.toolpath as tp
+    from servosurf.simulation import realisation_study
+
+    spec = tp.load_toolpath("toolpaths/lenslet_5um.toml")
+    fld = dataclasses.replace(spec.field, pitch_x=2e-6, pitch_y=2e-6, nx=80, ny=80)
+    spec = dataclasses.replace(spec, field=fld)
+    local = realisation_study(spec, seeds=[1, 2, 3], instrument=None)
+    dask = realisation_study(spec, seeds=[1, 2, 3], instrument=None, client=client)
+    assert dask.metrics.keys() == local.metrics.keys()
+    for k in local.metrics:
+        np.testing.assert_array_equal(dask.metrics[k], local.metrics[k])

@@ -128,6 +128,7 @@ def test_simulate_cli_json_keys(tmp_path, capsys):
         (["simulate", LENS, "--bandwidth", "-5"], "--bandwidth"),
         (["simulate", LENS, "--mass", "0"], "--mass"),
         (["simulate", LENS, "--bandwidth", "5000"], "bandwidth"),
+        (["simulate", LENS, "--realisations", "0"], "--realisations"),
     ],
 )
 def test_simulate_cli_errors(argv, match, capsys, tmp_path):
@@ -135,3 +136,53 @@ def test_simulate_cli_errors(argv, match, capsys, tmp_path):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and match in err[0]
     assert not list((tmp_path / "o").glob("surface.*"))
+
+
+def test_realisations_match_single_runs(small_lens):
+    from servosurf.report._simulation import analyse
+    from servosurf.simulation import realisation_study
+
+    seeds = [0, 3, 5]
+    study = realisation_study(small_lens, seeds=seeds, instrument=None)
+    assert study.seeds.tolist() == seeds
+    for i, seed in enumerate(seeds):  # each task is simulate(seed) + analyse
+        one = analyse(simulate(small_lens, seed=seed))
+        for k in ("form_error_max_m", "ra_m", "sa_m", "sq_m", "deviation_max_m"):
+            assert study.metrics[k][i] == one[k]
+        peaks = one["spectrum_peaks_per_m"]  # may be empty on this small field
+        np.testing.assert_equal(study.metrics["peak1_per_m"][i],
+                                peaks[0] if peaks else np.nan)
+    # the vibration realisation changes the roughness, not the force deviation
+    assert np.unique(study.metrics["sa_m"]).size == len(seeds)
+    assert np.unique(study.metrics["deviation_max_m"]).size == 1
+    st = study.statistics()["sa_m"]
+    assert st["mean"] == pytest.approx(np.mean(study.metrics["sa_m"]), rel=1e-12)
+    assert st["std"] == pytest.approx(np.std(study.metrics["sa_m"], ddof=1),
+                                      rel=1e-12)
+    assert st["min"] <= st["p5"] <= st["median"] <= st["p95"] <= st["max"]
+
+
+def test_realisations_bad_seeds(small_lens):
+    from servosurf.simulation import realisation_study
+
+    with pytest.raises(ConfigError, match="seeds"):
+        realisation_study(small_lens, seeds=[])
+    with pytest.raises(ConfigError, match="seeds"):
+        realisation_study(small_lens, seeds=[2, -1])
+    with pytest.raises(ConfigError, match="seeds="):
+        realisation_study(small_lens, seeds=[1], seed=3)
+
+
+def test_simulate_cli_realisations(tmp_path, capsys):
+    rc = main(["simulate", LENS, "--realisations", "3", "--seed", "2", "--out",
+               str(tmp_path / "r"), "--json", "--instrument", "none"])
+    assert rc == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["seeds"] == [2, 3, 4]
+    assert len(data["realisations"]["form_error_max_m"]) == 3
+    assert 150e-9 < data["statistics"]["form_error_max_m"]["mean"] < 350e-9
+    png = (tmp_path / "r" / "realisations.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    saved = json.loads((tmp_path / "r" / "realisations.json").read_text())
+    assert saved["realisations"] == data["realisations"]
+    assert not list((tmp_path / "r").glob("surface.*"))  # the study, not a map

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import add_scheduler_args
+
 FORMATS = ("datx", "dat", "x3p", "xyz", "npz")
 
 
@@ -75,6 +77,16 @@ def add_parser(sub) -> argparse.ArgumentParser:
         default=None,
         help="output directory (default results/<toolpath name>)",
     )
+    p.add_argument(
+        "--realisations",
+        metavar="K",
+        type=int,
+        default=1,
+        help="K > 1: simulate seeds SEED..SEED+K-1 of the vibration realisation and "
+        "write realisations.json (per-seed metrics in SI and their statistics) and "
+        "realisations.png instead of one map (default 1)",
+    )
+    add_scheduler_args(p, "the realisations (one task per seed)")
     p.add_argument("--json", action="store_true", help="print summary.json on stdout")
     return p
 
@@ -112,8 +124,12 @@ def run(args) -> int:
     tp = Path(args.toolpath)
     if not tp.is_file():
         raise ConfigError(f"{tp}: toolpath file not found")
+    if args.realisations < 1:
+        raise ConfigError(f"--realisations must be >= 1, got {args.realisations}")
     fmt = args.format or "datx"
     out = out_dir(args.out or Path("results") / tp.stem)
+    if args.realisations > 1:
+        return _run_realisations(args, tp, out)
     res = simulate(
         tp,
         machine=args.machine,
@@ -181,6 +197,71 @@ def run(args) -> int:
     if args.json:
         print_json(summary)
     return 0
+
+
+def _run_realisations(args, tp, out) -> int:
+    """``--realisations K``: one simulation per seed, metrics and their spread."""
+    from .._progress import bar, stage
+    from ..simulation import realisation_study
+    from ._common import dask_client, print_json, write_json
+
+    seeds = list(range(args.seed, args.seed + args.realisations))
+    with dask_client(args.scheduler, args.workers) as client, \
+            stage(f"{len(seeds)} realisations (seeds {seeds[0]}..{seeds[-1]})"):
+        study = realisation_study(
+            tp,
+            seeds=seeds,
+            client=client,
+            progress=lambda it, total=None: bar(it, total=total, desc="realisations"),
+            machine=args.machine,
+            workpiece=args.workpiece,
+            bandwidth=1448.0 if args.bandwidth is None else args.bandwidth,
+            mass=0.175 if args.mass is None else args.mass,
+            parts=tuple(args.parts),
+            instrument=None if args.instrument == "none" else args.instrument,
+        )
+    summary = study.to_dict()
+    summary.update(toolpath=str(tp), scheduler=args.scheduler,
+                   bandwidth_hz=1448.0 if args.bandwidth is None else args.bandwidth,
+                   moving_mass_kg=0.175 if args.mass is None else args.mass,
+                   parts=list(args.parts), instrument=args.instrument)
+    with stage("writing realisations.json and realisations.png"):
+        png = _plot_realisations(study, out / "realisations.png")
+        summary["files"] = {"png": str(png)}
+        write_json(out / "realisations.json", summary)
+    if args.json:
+        print_json(summary)
+    return 0
+
+
+def _plot_realisations(study, path):
+    """Per-seed metrics as strip plots with their mean and 5-95 % band."""
+    import numpy as np
+
+    from ..viz._common import figure, save
+
+    shown = [
+        ("form_error_max_m", "max form error [nm]", 1e9),
+        ("ra_m", "Ra [nm]", 1e9),
+        ("sa_m", "Sa [nm]", 1e9),
+        ("peak1_per_m", "strongest spectral peak [1/mm]", 1e-3),
+    ]
+    shown = [s for s in shown if np.isfinite(study.metrics[s[0]]).any()]
+    fig, axes = figure(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
+    for ax, (key, label, scale) in zip(axes[0], shown, strict=True):
+        v = study.metrics[key] * scale
+        v = v[np.isfinite(v)]
+        x = np.random.default_rng(0).uniform(-0.15, 0.15, v.size)  # jitter only
+        ax.plot(x, v, "o", ms=4, alpha=0.7)
+        ax.axhline(v.mean(), color="C3", lw=1)
+        ax.axhspan(np.percentile(v, 5), np.percentile(v, 95), color="C3", alpha=0.12)
+        ax.set_xlim(-0.5, 0.5)
+        ax.set_xticks([])
+        ax.set_ylabel(label)
+    fig.suptitle(f"{study.seeds.size} vibration realisations: mean (line), 5-95 % "
+                 "(band)")
+    fig.tight_layout()
+    return save(fig, path)
 
 
 def _plot_deviation(res, path):
