@@ -396,6 +396,56 @@ def whole_face_dask(quick: bool) -> dict:
     }
 
 
+def _warm_realisation() -> None:
+    """Load the simulation kernels in a dask worker (one numba thread)."""
+    import numba
+
+    from servosurf.simulation import realisation_study
+
+    numba.set_num_threads(1)
+    realisation_study(ROOT / "toolpaths" / "lenslet_5um.toml", seeds=[0],
+                      instrument=None, n_threads=1)
+
+
+@case("realisations_dask")
+def realisations_dask(quick: bool) -> dict:
+    """Vibration realisations of the 5 um lenslet: LocalCluster (2 worker processes
+    x 1 thread) against one process x 1 thread, one task per seed."""
+    import distributed
+
+    from servosurf._progress import set_quiet
+    from servosurf.simulation import realisation_study
+
+    set_quiet(True)
+    seeds = list(range(4 if quick else 8))
+    toolpath = ROOT / "toolpaths" / "lenslet_5um.toml"
+    kw = {"instrument": None, "n_threads": 1}
+    realisation_study(toolpath, seeds=[0], **kw)  # warm
+    t0 = time.perf_counter()
+    local = realisation_study(toolpath, seeds=seeds, **kw)
+    t_local = time.perf_counter() - t0
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cl, \
+            distributed.Client(cl) as client:
+        client.run(_warm_realisation)
+        t0 = time.perf_counter()
+        dres = realisation_study(toolpath, seeds=seeds, client=client, **kw)
+        t_dask = time.perf_counter() - t0
+    same = all(np.array_equal(local.metrics[k], dres.metrics[k], equal_nan=True)
+               for k in local.metrics)
+    return {
+        "realisations": len(seeds),
+        "local_1_thread_seconds": t_local,
+        "dask_2_workers_seconds": t_dask,
+        "dask_speedup": t_local / t_dask,
+        "identical": same,
+        "points_per_s": None,
+        "speedup_vs_reference": None,
+        "speedup_vs_exhaustive": None,
+        "peak_memory_bytes": None,
+    }
+
+
 @case("memory_bandwidth")
 def memory_bandwidth(quick: bool) -> dict:
     """Streaming triad a = b + s c over 3 x 128 MB, 1 and 2 threads (GB/s).

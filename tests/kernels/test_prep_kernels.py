@@ -53,6 +53,23 @@ def test_crop_mask_matches_reference(seed, window):
         assert got == count
 
 
+def test_two_samples_with_more_chunks_than_samples():
+    t = np.array([0.0, 1e-3])
+    theta = np.array([0.0, 1e-3])
+    r = np.array([2e-3, 2e-3])
+    z = np.array([0.0, 1e-9])
+    want = naive.max_slope(t, theta, r, z, 1000.0, 0.0)
+    assert want[1] == 0
+    for n_chunks in (1, 2, 8):
+        bad, slope, k = _scan_slope(t, theta, r, z, 1000.0, 0.0, n_chunks,
+                                    np.empty((n_chunks, 2)))
+        assert not bad and (slope, k) == want
+        keep = np.zeros(2, dtype=bool)
+        got = _crop_mask_chunked(theta, r, 1.9e-3, 2.1e-3, 0.0, False, 0.0, -math.pi,
+                                 math.pi, n_chunks, keep)
+        assert got == 2 and keep.all()
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_scan_slope_matches_reference(seed):
     rng = np.random.default_rng(seed)
@@ -68,7 +85,8 @@ def test_scan_slope_matches_reference(seed):
 
 @pytest.mark.parametrize("where", ["first", "boundary", "last"])
 @pytest.mark.parametrize("fault, message", [
-    ("nan_theta", "finite"), ("inf_r", "finite"), ("nan_z", "finite"),
+    ("nan_t", "finite"), ("nan_theta", "finite"), ("inf_r", "finite"),
+    ("nan_z", "finite"),
     ("repeat_theta", "strictly increasing"), ("negative_r", ">= 0 m"),
 ])
 def test_path_faults_are_found_anywhere(where, fault, message):
@@ -77,8 +95,13 @@ def test_path_faults_are_found_anywhere(where, fault, message):
     theta, r, z = theta.copy(), r.copy(), z.copy()
     n_chunks = 8
     step = (t.size + n_chunks - 1) // n_chunks
-    i = {"first": 1, "boundary": 3 * step, "last": t.size - 1}[where]
-    if fault == "nan_theta":
+    i = {"first": 0, "boundary": 3 * step, "last": t.size - 1}[where]
+    t = t.copy()
+    if fault == "repeat_theta":
+        i = max(i, 1)
+    if fault == "nan_t":
+        t[i] = np.nan
+    elif fault == "nan_theta":
         theta[i] = np.nan
     elif fault == "inf_r":
         r[i] = np.inf
@@ -139,24 +162,56 @@ def test_crop_mask_at_every_chunk_boundary_phase():
         assert got == count
 
 
-@pytest.mark.parametrize("stride", [1, 7, 64])
-def test_hit_fraction_matches_reference(stride):
+@pytest.mark.parametrize("n_tests", [1, 7, 64, 5000])
+def test_hit_fraction_matches_reference(n_tests):
     from servosurf.kernels._prep import _hit_fraction
 
     rng = np.random.default_rng(5)
     t, theta, r, z, fs = wandering_path(rng)
     window = (0.4, -0.05, 0.08)
-    rmin, rmax, reach = 1.99e-3, 2.01e-3, 5e-6
-    rl = np.minimum(r[:-1], r[1:])[::stride]
-    rh = np.maximum(r[:-1], r[1:])[::stride]
-    rel = np.mod(theta[:-1] - 0.4 + np.pi, 2 * np.pi)[::stride] - np.pi
-    dth = np.diff(theta)[::stride]
+    rmin, rmax, reach = 1.99e-3, 1.995e-3, 5e-6
+    m = theta.size - 1
+    g = (math.sqrt(5) - 1) / 2
+    idx = np.minimum((np.mod(np.arange(n_tests) * g, 1.0) * m).astype(int), m - 1)
+    keep_all, _ = naive.crop_mask(theta, r, rmin, rmax, reach, window)
+    hit = np.zeros(m, dtype=bool)  # per interval, from the reference marks
+    rl = np.minimum(r[:-1], r[1:])
+    rh = np.maximum(r[:-1], r[1:])
+    rel = np.mod(theta[:-1] - 0.4 + np.pi, 2 * np.pi) - np.pi
+    dth = np.diff(theta)
     hit = (((rl <= rmax + reach) & (rh >= rmin - reach)) | (rl <= reach - rmin)) & (
         ((rel <= 0.08) & (rel + dth >= -0.05)) | (rel - 2 * np.pi + dth >= -0.05)
         | (dth >= 2 * np.pi))
-    got = _hit_fraction(theta, r, stride, rmin, rmax, reach, True, *window)
-    assert 0.0 < got < 1.0
-    assert got == hit.mean()
+    assert keep_all[:-1][hit].all()  # the per-interval marks agree with the mask
+    got = _hit_fraction(theta, r, n_tests, rmin, rmax, reach, True, *window)
+    np.testing.assert_allclose(got, hit[idx].mean(), rtol=0, atol=1e-15)
+    if n_tests == 5000:
+        assert 0.0 < got < 1.0
+        assert abs(got - hit.mean()) < 0.05  # spread over the whole path
+
+
+def test_crop_estimate_does_not_alias_with_the_revolution():
+    # 64 samples per revolution: every 64th interval sits at the same angle, so a
+    # strided estimate would see the whole path hitting; the path must still be
+    # cropped, and the clearance check must see only the cropped part (the steep
+    # steps lie half a turn away from the field)
+    import warnings
+
+    from servosurf.toolpath._sweep import prepare_path
+
+    n = 70000
+    k = np.arange(n)
+    theta = 2 * np.pi * k / 64
+    fs = 1280.0
+    r = np.full(n, 2e-3)
+    near_pi = np.abs(np.mod(theta, 2 * np.pi) - np.pi) < 0.5
+    z = np.where(near_pi & (k % 2 == 1), 1e-4, 0.0)
+    path = tp.SampledPath(k / fs, theta, r, z, fs)
+    field = tp.Field(pitch_x=1e-6, pitch_y=1e-6, nx=8, ny=8, center_x=2e-3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prep = prepare_path(path, tp.Tool(), field, check=True)
+    assert prep.path.n < 0.2 * n
 
 
 def test_uniform_initial_equals_the_same_initial_array():

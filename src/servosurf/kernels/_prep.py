@@ -22,13 +22,13 @@ TWO_PI = 2.0 * np.pi
 
 
 @njit(cache=CACHE, fastmath=FASTMATH)
-def _check_path(theta, r, z):  # pragma: no cover - numba
+def _check_path(t, theta, r, z):  # pragma: no cover - numba
     """Validate a sampled path in one pass.
 
     Parameters
     ----------
-    theta, r, z : ndarray of shape (n,)
-        Angle (rad), radius (m), height (m).
+    t, theta, r, z : ndarray of shape (n,)
+        Time (s), angle (rad), radius (m), height (m).
 
     Returns
     -------
@@ -37,7 +37,8 @@ def _check_path(theta, r, z):  # pragma: no cover - numba
     """
     n = theta.size
     for i in range(n):
-        if not (np.isfinite(theta[i]) and np.isfinite(r[i]) and np.isfinite(z[i])):
+        if not (np.isfinite(t[i]) and np.isfinite(theta[i]) and np.isfinite(r[i])
+                and np.isfinite(z[i])):
             return 1
         if i > 0 and not theta[i] > theta[i - 1]:
             return 2
@@ -89,12 +90,13 @@ def _interval_slope(t, theta, r, z, i, gap, r_skip):  # pragma: no cover - numba
 
 
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
-def _chunk_faulty(theta, r, z):  # pragma: no cover - numba
+def _chunk_faulty(t, theta, r, z):  # pragma: no cover - numba
     """Whether a sample of these slices is non-finite or at r < 0, or theta does not
     strictly increase along them."""
     bad = False
     for i in range(theta.size):
-        fin = np.isfinite(theta[i]) & np.isfinite(r[i]) & np.isfinite(z[i])
+        fin = (np.isfinite(t[i]) & np.isfinite(theta[i]) & np.isfinite(r[i])
+               & np.isfinite(z[i]))
         bad |= (not fin) | (r[i] < 0.0)
     for i in range(1, theta.size):
         bad |= theta[i] <= theta[i - 1]
@@ -131,8 +133,9 @@ def _scan_slope(t, theta, r, z, fs, r_skip, n_chunks,
     Returns
     -------
     faulty : bool
-        True when a sample is non-finite, theta is not strictly increasing or
-        r < 0 (:func:`_check_path` tells which); the slope is then meaningless.
+        True when a sample (t included) is non-finite, theta is not strictly
+        increasing or r < 0 (:func:`_check_path` tells which); the slope is then
+        meaningless.
     slope : float
         Largest slope (dimensionless); 0 when none.
     index : int
@@ -155,21 +158,23 @@ def _scan_slope(t, theta, r, z, fs, r_skip, n_chunks,
         # slices from the previous sample (for the increasing check) and to the
         # next one (intervals): indices from 0, so the loops vectorise
         p0 = max(s0, 1) - 1
-        bad = _chunk_faulty(theta[p0:s1], r[p0:s1], z[p0:s1])
+        bad = _chunk_faulty(t[p0:s1], theta[p0:s1], r[p0:s1], z[p0:s1])
         e = min(m, s1) + 1
         best = _chunk_max_slope(t[s0:e], theta[s0:e], r[s0:e], z[s0:e], gap, r_skip)
         res[c, 0] = bad
         res[c, 1] = best
     bad = False
     best = 0.0
-    at = -1
+    chunk = -1
     for c in range(n_chunks):
         bad |= res[c, 0] != 0.0
         if res[c, 1] > best:
             best = res[c, 1]
-            at = c
-    if at >= 0:  # first interval of the first chunk that holds the maximum
-        for i in range(at * step, min(m, (at + 1) * step)):
+            chunk = c
+    at = -1
+    if chunk >= 0:  # first interval of the first chunk that holds the maximum
+        at = chunk * step  # (the rescan recomputes the same values, so it finds it)
+        for i in range(chunk * step, min(m, (chunk + 1) * step)):
             if _interval_slope(t, theta, r, z, i, gap, r_skip) == best:
                 at = i
                 break
@@ -268,17 +273,25 @@ def _crop_mask_chunked(theta, r, rmin, rmax, reach, has_window, centre, lo, hi,
     return counts.sum()
 
 
+#: Golden-ratio conjugate: the sample positions of :func:`_hit_fraction` form a
+#: Weyl sequence, which no periodic structure of the path (samples per revolution)
+#: can alias with.
+_GOLDEN = 0.6180339887498949
+
+
 @njit(cache=CACHE, fastmath=FASTMATH)
-def _hit_fraction(theta, r, stride, rmin, rmax, reach, has_window, centre, lo,
+def _hit_fraction(theta, r, n_tests, rmin, rmax, reach, has_window, centre, lo,
                   hi):  # pragma: no cover - numba
-    """Fraction of every ``stride``-th interval that can cut the rectangle.
+    """Fraction of ``n_tests`` well-spread intervals that can cut the rectangle.
 
     Parameters
     ----------
     theta, r : ndarray of shape (n,)
         Angle (rad) and radius (m); n >= 2.
-    stride : int
-        Test intervals 0, stride, 2 stride, ...
+    n_tests : int
+        Intervals tested, at positions ``floor(frac(k g) (n - 1))`` for
+        k = 0 .. n_tests - 1 with g the golden-ratio conjugate (a low-discrepancy
+        sequence: even cover of the path, no alignment with a periodic sampling).
     rmin, rmax, reach, has_window, centre, lo, hi
         As for :func:`_crop_mask_chunked` (m, rad).
 
@@ -287,10 +300,14 @@ def _hit_fraction(theta, r, stride, rmin, rmax, reach, has_window, centre, lo,
     float
         Share of the tested intervals that hit, in [0, 1].
     """
+    m = theta.size - 1
     hits = 0
-    tested = 0
-    for i in range(0, theta.size - 1, stride):
+    u = 0.0
+    for _ in range(n_tests):
+        i = min(int(u * m), m - 1)
         hits += _interval_hits(theta, r, i, rmin, rmax, reach, has_window, centre, lo,
                                hi)
-        tested += 1
-    return hits / tested
+        u += _GOLDEN
+        if u >= 1.0:
+            u -= 1.0
+    return hits / n_tests

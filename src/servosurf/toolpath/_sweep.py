@@ -169,8 +169,8 @@ def _rect_polar(xmin, xmax, ymin, ymax, reach):
     return rmin, rmax, (centre, min(min(rel), 0.0), max(max(rel), 0.0))
 
 
-#: Paths longer than this (samples) are first crop-tested on every
-#: ``_CROP_STRIDE``-th interval.
+#: Paths longer than this (samples) are first crop-tested on one interval in
+#: ``_CROP_STRIDE``, spread over the path (``kernels._prep._hit_fraction``).
 _CROP_SAMPLE_MIN = 65536
 _CROP_STRIDE = 64
 
@@ -179,9 +179,11 @@ def _crop(path: SampledPath, rmin: float, rmax: float, window, reach: float):
     """Keep the intervals that can cut the rectangle (both of their samples).
 
     The crop changes speed, not results: a path of which more than 80 % would be
-    kept is used whole. For long paths a strided test of every 64th interval
-    decides that first (above 90 % hitting, the full pass is skipped), since a path
-    sampled for the field, as ``simulate`` and ``face`` sample it, keeps nearly all.
+    kept is used whole. For long paths a test of one interval in 64, spread over
+    the path on a golden-ratio sequence (no aliasing with the samples per
+    revolution), decides that first: above 90 % hitting, the full pass is skipped,
+    since a path sampled for the field, as ``simulate`` and ``face`` sample it,
+    keeps nearly all.
     """
     from ..kernels._prep import _crop_mask_chunked, _hit_fraction
 
@@ -192,8 +194,8 @@ def _crop(path: SampledPath, rmin: float, rmax: float, window, reach: float):
     # allowances for rounding: 1 nm radially, 1 nrad in angle
     args = (rmin, rmax, reach + 1e-9, window is not None, centre, lo - 1e-9,
             hi + 1e-9)
-    if path.n > _CROP_SAMPLE_MIN and _hit_fraction(path.theta, path.r, _CROP_STRIDE,
-                                                   *args) > 0.9:
+    if path.n > _CROP_SAMPLE_MIN and _hit_fraction(
+            path.theta, path.r, path.n // _CROP_STRIDE, *args) > 0.9:
         return path
     keep = np.empty(path.n, dtype=np.bool_)
     count = _crop_mask_chunked(path.theta, path.r, *args, _n_chunks(path.n), keep)
@@ -204,7 +206,8 @@ def _crop(path: SampledPath, rmin: float, rmax: float, window, reach: float):
 
 def _raise_path_error(path: SampledPath, code: int) -> None:
     if code == 1:
-        raise ConfigError("path.theta, path.r and path.z must have finite values")
+        raise ConfigError(
+            "path.t, path.theta, path.r and path.z must have finite values")
     if code == 2:
         raise ConfigError(
             "path.theta must be strictly increasing (unwrapped angle, rad)")
@@ -264,7 +267,8 @@ def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
         if bad:
             from ..kernels._prep import _check_path
 
-            _raise_path_error(path, int(_check_path(path.theta, path.r, path.z)))
+            _raise_path_error(
+                path, int(_check_path(path.t, path.theta, path.r, path.z)))
     if path.n < 2:
         return None
     p = _crop(path, rmin, rmax, window, reach) if crop else path
