@@ -406,9 +406,16 @@ class RealisationStudy:
 
 
 def _realisation_metrics(toolpath, kwargs: dict, seed: int) -> dict:
-    """One task of :func:`realisation_study`: simulate with ``seed``, analyse."""
-    from .report._simulation import analyse
+    """One task of :func:`realisation_study`: simulate with ``seed``, analyse.
 
+    Keeps freed large blocks for reuse (:func:`~servosurf.scale.reuse_freed_memory`):
+    dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``, so every
+    realisation would otherwise page-fault its buffers in again.
+    """
+    from .report._simulation import analyse
+    from .scale._memory import reuse_freed_memory
+
+    reuse_freed_memory()
     quiet = _progress.is_quiet()
     _progress.set_quiet(True)
     try:
