@@ -128,18 +128,17 @@ def run(args) -> int:
         raise ConfigError(f"--realisations must be >= 1, got {args.realisations}")
     fmt = args.format or "datx"
     out = out_dir(args.out or Path("results") / tp.stem)
+    settings = {  # the paper's cutting set-up unless given
+        "machine": args.machine,
+        "workpiece": args.workpiece,
+        "bandwidth": 1448.0 if args.bandwidth is None else args.bandwidth,
+        "mass": 0.175 if args.mass is None else args.mass,
+        "parts": tuple(args.parts),
+        "instrument": None if args.instrument == "none" else args.instrument,
+    }
     if args.realisations > 1:
-        return _run_realisations(args, tp, out)
-    res = simulate(
-        tp,
-        machine=args.machine,
-        workpiece=args.workpiece,
-        bandwidth=1448.0 if args.bandwidth is None else args.bandwidth,
-        mass=0.175 if args.mass is None else args.mass,
-        seed=args.seed,
-        parts=tuple(args.parts),
-        instrument=None if args.instrument == "none" else args.instrument,
-    )
+        return _run_realisations(args, tp, out, settings)
+    res = simulate(tp, seed=args.seed, **settings)
     with stage("analysis"):
         summary = analyse(res)
     plots = summary.pop("_plots")
@@ -199,8 +198,11 @@ def run(args) -> int:
     return 0
 
 
-def _run_realisations(args, tp, out) -> int:
-    """``--realisations K``: one simulation per seed, metrics and their spread."""
+def _run_realisations(args, tp, out, settings) -> int:
+    """``--realisations K``: one simulation per seed, metrics and their spread.
+
+    ``settings`` are the :func:`~servosurf.simulation.simulate` keywords but the seed.
+    """
     from .._progress import bar, stage
     from ..simulation import realisation_study
     from ._common import dask_client, print_json, write_json
@@ -213,17 +215,12 @@ def _run_realisations(args, tp, out) -> int:
             seeds=seeds,
             client=client,
             progress=lambda it, total=None: bar(it, total=total, desc="realisations"),
-            machine=args.machine,
-            workpiece=args.workpiece,
-            bandwidth=1448.0 if args.bandwidth is None else args.bandwidth,
-            mass=0.175 if args.mass is None else args.mass,
-            parts=tuple(args.parts),
-            instrument=None if args.instrument == "none" else args.instrument,
+            **settings,
         )
     summary = study.to_dict()
     summary.update(toolpath=str(tp), scheduler=args.scheduler,
-                   bandwidth_hz=1448.0 if args.bandwidth is None else args.bandwidth,
-                   moving_mass_kg=0.175 if args.mass is None else args.mass,
+                   bandwidth_hz=settings["bandwidth"],
+                   moving_mass_kg=settings["mass"],
                    parts=list(args.parts), instrument=args.instrument)
     with stage("writing realisations.json and realisations.png"):
         png = _plot_realisations(study, out / "realisations.png")
