@@ -17,6 +17,8 @@ Measurement rules
 * Times are the best of several runs after a warm-up call (JIT compilation and the
   on-disk cache load are excluded; ``compile_s`` reports the first call). They are
   whole ``sweep()`` calls: path checks, cropping and bucket statistics included.
+  ``kernel_points_per_s`` and ``prepare_seconds`` split a call into its two parts
+  (the kernel on an already prepared path, and the preparation alone).
 * ``points_per_cpu_s_1_thread`` divides by process CPU time of a one-thread call: on a
   shared machine it is the steadiest measure of the kernel's own cost.
 * Slow peers (plain-numpy reference, exhaustive kernel) run on a sub-field of the same
@@ -58,6 +60,7 @@ from servosurf.scale import (  # noqa: E402
     reuse_freed_memory,
     simulate_face,
 )
+from servosurf.toolpath._sweep import prepare_path, run_kernel  # noqa: E402
 
 CASES: dict[str, Callable[[bool], dict]] = {}
 
@@ -127,6 +130,14 @@ def sweep_case(spec, field, path, *, exhaustive_rows, reference_rows, quick):
     c1 = best_cpu_time(lambda: tp.sweep(path, tool, field, n_threads=1),
                        3 if quick else 5)
     peak = traced_peak(lambda: tp.sweep(path, tool, field))
+    # the two parts of a sweep() call: path preparation (checks, clearance,
+    # crop decision, bucket statistics) and the kernel on the prepared path
+    t_prep = best_time(lambda: prepare_path(path, tool, field, check=True),
+                       3 if quick else 7)
+    prep = prepare_path(path, tool, field, check=True)
+    buf = np.empty(field.shape)
+    t_kernel = best_time(lambda: run_kernel(prep, tool, field, buf, fill=0.0),
+                         3 if quick else 7)
     # exhaustive kernel on a band of rows, per point
     rows = (field.ny // 2, field.ny // 2 + exhaustive_rows)
     ze = tp.sweep(path, tool, field, rows=rows, method="exhaustive").z
@@ -147,6 +158,9 @@ def sweep_case(spec, field, path, *, exhaustive_rows, reference_rows, quick):
         "points_per_s": pruned_rate,
         "points_per_s_1_thread": n / t1,
         "points_per_cpu_s_1_thread": n / c1,
+        "kernel_points_per_s": n / t_kernel,
+        "kernel_identical": bool(np.array_equal(buf, z, equal_nan=True)),
+        "prepare_seconds": t_prep,
         "seconds": t_pruned,
         "compile_s": compile_s,
         "exhaustive_points_per_s": exh_rate,
