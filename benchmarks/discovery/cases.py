@@ -243,6 +243,10 @@ def _source_psds(case: CaseModel, p: ModelParams, f: np.ndarray, ool: dict | Non
     w = case.disturbance_psds(p, f)
     if ool and ool["kind"] == "sensor-1/f-noise":
         w["sensor_noise"] = w["sensor_noise"] + ool["par"][0] ** 2 * 1000.0 / f
+    if ool and ool["kind"] == "noise-scale":  # misspecified noise model (no physics)
+        for k, c in zip(("base", "sensor_noise", "current_noise"), ool["par"],
+                        strict=True):
+            w[k] = w[k] * c
     return w
 
 
@@ -949,6 +953,13 @@ def build(spec: dict, campaign: dict):
         knobs.append(kn(s))
         truths[name] = {k: float(v) for k, v in tr(s).items()}
         achieved[name] = float(e)
+    if spec.get("noise_scale"):
+        # noise-model misspecification null: PSD factors (base, sensor, current),
+        # no effect; its ENR (relative change of the idle noise power) is recorded
+        par = [float(c) for c in spec["noise_scale"]]
+        ool_make = {"kind": "noise-scale", "par": par}
+        achieved["noise-scale"] = enr(base_case(), ModelParams(), ool_make, campaign,
+                                      nominal_recordings(campaign))
     if spec.get("ool"):
         (om, okn, _s0), s, e = _scaled(
             spec["enr"],

@@ -155,6 +155,7 @@ def make_one(args) -> dict:
         "ool": spec["ool"],
         "enr": spec["enr"],
         "enr_achieved": achieved,
+        "noise_scale": spec.get("noise_scale"),
         "seed": spec["seed"],
         "truth": truth,
         "campaign": campaign_name,
@@ -209,6 +210,8 @@ def generate_specs(
             "seed": int(seed * 1009 + 17 * n),
             "case": f"case_{n:04d}",
         }
+        if sp.get("noise_scale"):
+            s["noise_scale"] = [float(c) for c in sp["noise_scale"]]
         full.append(s)
     work = [(s, campaign, str(out)) for s in full]
     if jobs > 1:
