@@ -339,7 +339,7 @@ def load_manifest(path: str | Path) -> Manifest:
 # ---------------------------------------------------------------- readers
 def _read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...]):
     try:
-        with open(path, newline="") as fh:
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # BOM-tolerant
             rows = [
                 r for r in csv.reader(ln for ln in fh if not ln.startswith("#")) if r
             ]
@@ -372,12 +372,26 @@ def _read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...]):
 
 
 def _fs_from_time(t: np.ndarray, path: Path) -> float:
+    """Sampling rate (Hz) of a record's time column (s).
+
+    The step is the least-squares slope of time against sample number, and every
+    time must lie within a quarter step of that uniform grid: times printed with a few
+    significant digits (``%.6g`` puts 1e-5 s of rounding on a 1e-4 s step) are
+    accepted, a missing or repeated sample is not.
+    """
     dt = np.diff(t)
     if dt.size == 0 or not np.all(dt > 0):
         raise ConfigError(f"{path}: time_s must increase within a record")
-    step = float(np.median(dt))
-    if np.max(np.abs(dt - step)) > 1e-3 * step:
-        raise ConfigError(f"{path}: time_s must be uniformly sampled")
+    k = np.arange(t.size) - 0.5 * (t.size - 1)
+    step = float(k @ (t - t.mean())) / float(k @ k)  # least-squares step
+    off = t - (t.mean() + step * k)
+    if np.max(np.abs(off)) > 0.25 * step:
+        k = int(np.argmax(np.abs(off)))
+        raise ConfigError(
+            f"{path}: time_s must be uniformly sampled (sample {k} at "
+            f"{t[k]!r} s is {off[k] / step:+.2f} steps off the grid of "
+            f"{step:.6g} s)"
+        )
     return 1.0 / step
 
 
