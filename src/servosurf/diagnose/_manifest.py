@@ -386,10 +386,10 @@ def _fs_from_time(t: np.ndarray, path: Path) -> float:
     step = float(k @ (t - t.mean())) / float(k @ k)  # least-squares step
     off = t - (t.mean() + step * k)
     if np.max(np.abs(off)) > 0.25 * step:
-        k = int(np.argmax(np.abs(off)))
+        i = int(np.argmax(np.abs(off)))
         raise ConfigError(
-            f"{path}: time_s must be uniformly sampled (sample {k} at "
-            f"{t[k]!r} s is {off[k] / step:+.2f} steps off the grid of "
+            f"{path}: time_s must be uniformly sampled (sample {i} at "
+            f"{t[i]!r} s is {off[i] / step:+.2f} steps off the grid of "
             f"{step:.6g} s)"
         )
     return 1.0 / step
