@@ -86,3 +86,25 @@ def test_no_retry_when_the_best_configuration_is_admitted():
     _, terms, _ = eng.run(max_terms=3)
     assert [t.config.label for t in terms] == ["a"]
     assert calls["fitted"] == ["a"]
+
+
+# ------------------------------------------------------------------ verdict
+def _mm(sig):
+    from servosurf.diagnose._locate import Mismatch
+
+    return Mismatch("idle.npz", "spectrum", "band 250-315 Hz", sig, "band-power", {})
+
+
+def test_weak_remainder_does_not_make_a_verdict():
+    from servosurf.diagnose._diagnose import _verdict
+
+    # the strongest stray locator hit of 100 null cases had significance 4.98;
+    # the weakest remainder of an out-of-catalogue case of the blind suite 16.5
+    weak, strong = _mm(5.0), _mm(16.5)
+    assert _verdict(False, False, [weak], 0.0, 0.0) == "consistent"
+    assert _verdict(False, False, [], 0.0, 0.0) == "consistent"
+    assert _verdict(False, False, [strong], 0.0, 10.0) == "unexplained"
+    assert _verdict(False, True, [], 0.0, 0.0) == "unexplained"  # recalibration
+    assert _verdict(True, False, [weak], 50.0, 0.0) == "explained"
+    assert _verdict(True, False, [strong], 50.0, 10.0) == "partly-explained"
+    assert _verdict(True, False, [strong], 5.0, 50.0) == "unexplained"
