@@ -65,6 +65,20 @@ def test_bad_frf_file(tmp_path):
         read_frf_csv(p)
 
 
+def test_frf_csv_with_bom_and_a_dc_row(tmp_path):
+    # an independent exporter: Excel-style BOM and a 0 Hz first row
+    rows = [(0.0, 1.5, 0.0), (10.0, 1.0, -0.5), (20.0, 0.5, -0.7), (40.0, 0.2, -0.4)]
+    text = "frequency_hz,real,imag\n" + "".join(f"{a},{b},{c}\n" for a, b, c in rows)
+    p = tmp_path / "frf.csv"
+    p.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    f, h = read_frf_csv(p)
+    np.testing.assert_array_equal(f, [10.0, 20.0, 40.0])
+    np.testing.assert_array_equal(h, [1.0 - 0.5j, 0.5 - 0.7j, 0.2 - 0.4j])
+    p.write_text(text.replace("10.0,1.0", "-10.0,1.0"))  # negative: still an error
+    with pytest.raises(ConfigError, match="positive"):
+        read_frf_csv(p)
+
+
 def test_identify_cli_writes_loadable_machine(tmp_path, capsys):
     import json
 

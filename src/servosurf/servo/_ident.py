@@ -42,6 +42,10 @@ DEFAULT_IDENT_PARAMS = (
 def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.ndarray]:
     """Read an FRF from CSV with header ``frequency_hz,real,imag``.
 
+    A UTF-8 byte-order mark is tolerated and a row at 0 Hz (DC, where a measured
+    FRF carries no phase information and the models' logs are undefined) is
+    dropped; other frequencies must be positive and increasing.
+
     Returns
     -------
     freq : ndarray
@@ -51,7 +55,8 @@ def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
     """
     name = str(source) if isinstance(source, str | Path) else "<buffer>"
     try:
-        fh = open(source, newline="") if isinstance(source, str | Path) else source
+        fh = (open(source, newline="", encoding="utf-8-sig")
+              if isinstance(source, str | Path) else source)
     except OSError as exc:
         raise ConfigError(f"{name}: cannot open FRF file: {exc.strerror}") from None
     with fh:
@@ -68,6 +73,8 @@ def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
         raise ConfigError(f"{name}: every row must hold three numbers") from None
     if data.ndim != 2 or data.shape[0] < 3 or data.shape[1] != 3:
         raise ConfigError(f"{name}: need at least 3 rows of three numbers")
+    if data.shape[0] > 3 and data[0, 0] == 0.0:
+        data = data[1:]  # DC row
     f = data[:, 0]
     if not (np.all(np.isfinite(data)) and f[0] > 0 and np.all(np.diff(f) > 0)):
         raise ConfigError(
