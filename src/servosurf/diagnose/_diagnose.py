@@ -413,6 +413,11 @@ def _fit_percent(blocks, p: ModelParams) -> dict[str, float]:
     return out
 
 
+def _significant(rem: list) -> list:
+    """The mismatches of ``rem`` at :data:`VERDICT_SIGNIFICANCE` or above."""
+    return [m for m in rem if m.significance >= VERDICT_SIGNIFICANCE]
+
+
 def _verdict(phys: bool, recal: bool, rem: list, explained: float,
              left: float) -> str:
     """The verdict from what was selected and what is left.
@@ -432,7 +437,7 @@ def _verdict(phys: bool, recal: bool, rem: list, explained: float,
     str
         One of :data:`VERDICTS`.
     """
-    remainder = any(m.significance >= VERDICT_SIGNIFICANCE for m in rem)
+    remainder = bool(_significant(rem))
     if not phys:
         # recalibration alone is not an explanation by the catalogue of physics:
         # report it, but call the mismatch unexplained
@@ -549,7 +554,7 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
     by_block: dict[str, float] = {}
     # what is left after the fit, at the verdict's significance (all of ``rem`` is
     # still reported)
-    rem_v = [m for m in rem if m.significance >= VERDICT_SIGNIFICANCE]
+    rem_v = _significant(rem)
     for m in rem_v:
         by_block[m.recording] = max(by_block.get(m.recording, 0.0), m.significance)
     for v in by_block.values():
