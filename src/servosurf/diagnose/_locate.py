@@ -362,6 +362,56 @@ def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mism
 MAD_DIFF_EFFICIENCY = 0.77
 
 
+def variance_excess_logsf(
+    ss: float, dof: int, *, share: float, sigma_dof: float, overlap: int
+) -> float | None:
+    """log10 p of a whitened sum of squares this large, with sigma estimated.
+
+    The map and profile residuals are divided by an instrument sigma estimated
+    from the data (:class:`PointsBlock`, ``sigma_dof`` dof). To first order the
+    statistic's mean square is ``1 - share * e`` with ``e`` the relative error of
+    the variance estimate (variance ``2 / sigma_dof``), and ``overlap`` of its
+    ``dof`` values were themselves part of that estimate, so
+
+        var(ss / dof) = 2 / dof + 2 share^2 / sigma_dof
+                        - 4 share overlap / (dof sigma_dof),
+
+    matched by a scaled chi2 with ``k = 2 / var`` dof (an F test when ``share``
+    is 1 and nothing overlaps). Treating sigma as known made a chi2(dof) test
+    fire on null cases (measured: the along-cut RMS ratio of null ring profiles
+    spread 1.3x wider than chi2 and followed the uncut top's).
+
+    Parameters
+    ----------
+    ss : float
+        Sum of squares of the whitened values, dimensionless.
+    dof : int
+        Their degrees of freedom.
+    share : float
+        Share (0-1) of their variance that is the estimated instrument noise.
+    sigma_dof : float
+        dof of the instrument-variance estimate (``inf`` when known).
+    overlap : int
+        How many of the ``dof`` entered that estimate.
+
+    Returns
+    -------
+    float or None
+        log10 of the one-sided p-value; None when the statistic is fixed by the
+        estimate itself (it then carries no information, e.g. the uncut top of a
+        profile whose noise is estimated from it alone).
+    """
+    if dof < 1:
+        return None
+    var = 2.0 / dof
+    if math.isfinite(sigma_dof) and sigma_dof > 0:
+        var += 2.0 * share**2 / sigma_dof - 4.0 * share * overlap / (dof * sigma_dof)
+    if var < 0.05 * 2.0 / dof:
+        return None
+    k = 2.0 / var
+    return _chi2_logsf(ss / dof * k, k)
+
+
 def force_excess_logsf(r: np.ndarray) -> float:
     """log10 p of the residual power excess of a force record (one-sided).
 
@@ -459,27 +509,45 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
     dom = b.domain
     n_unc = int((~b.cut).sum())
     n_cut = int(b.cut.sum())
+    # (label, whitened values, share of their variance that is instrument noise,
+    # how many of their dof went into the instrument-noise estimate)
     parts = []
     if n_unc:
-        parts.append(("uncut top (instrument noise, piston, tilt)", w[:n_unc]))
+        parts.append(
+            (
+                "uncut top (instrument noise, piston, tilt)",
+                w[:n_unc],
+                1.0,
+                b.sigma_parts["uncut"],
+            )
+        )
     if n_cut:
         parts.append(
             (
                 "across the cut (contact angle: tool shape, recovery)",
                 w[n_unc : n_unc + n_cut],
+                1.0,
+                b.sigma_parts["within"],
             )
         )
         parts.append(
             (
                 "along the cut (tool height in time: servo, sensor, drift, spindle)",
                 w[n_unc + n_cut :],
+                b.instrument_share,
+                0,
             )
         )
-    for label, v in parts:
+    for label, v, share, overlap in parts:
         if v.size == 0:
             continue
         dof = v.size if "across" not in label else max(n_cut - b.nb, 1)
-        lp = _chi2_logsf(float(v @ v), dof) + math.log10(len(parts))
+        lp = variance_excess_logsf(
+            float(v @ v), dof, share=share, sigma_dof=b.sigma_dof, overlap=overlap
+        )
+        if lp is None:
+            continue
+        lp += math.log10(len(parts))
         if lp < math.log10(ALPHA):
             out.append(
                 Mismatch(
