@@ -86,8 +86,9 @@ class Locations:
         Candidate line frequencies, Hz.
     orders : list of int
         Candidate spindle orders (undulations per revolution).
-    record_length : int
-        Samples of the idle records (line bin width fs / record_length).
+    record_length : float
+        Length of the idle records in controller samples (line bin width
+        fs / record_length, Hz).
     line_probe : callable
         ``line_probe(f) -> m`` base amplitude giving one noise level in a bin.
     kinds : set of str
@@ -106,7 +107,7 @@ class Locations:
     mode_freqs: list = field(default_factory=list)
     line_freqs: list = field(default_factory=list)
     orders: list = field(default_factory=list)
-    record_length: int = 4096
+    record_length: float = 4096
     line_probe: object = None
     kinds: set = field(default_factory=set)
     nominal_delay: float = 1.0

@@ -34,6 +34,14 @@ formats:
 ``cut``
     CSV ``time_s,force_n,following_error_m`` recorded while cutting the case's
     toolpath, ``time_s`` from the start of the toolpath (loop at rest at t = 0).
+
+Time records may be sampled at another rate than the controller's (an
+acquisition at its own rate, another simulator's loop rate). The loop is then
+simulated at the controller rate, its command and force splined from the record,
+and its prediction splined back to the record's sample times; the residual is
+compared from ``fs_controller / 4096`` up to 0.8 of the lower Nyquist frequency
+(above that an acquisition's anti-alias filter rolls off, which the model does
+not know). The record is assumed anti-aliased.
 ``surface``, ``profile``
     Any file :func:`servosurf.io.read_surface` / ``read_profile`` accept, or NPZ with
     ``z``, ``dx``, ``dy`` (surface; optional ``x0``, ``y0``, the centre of pixel
