@@ -163,6 +163,17 @@ def test_diagnose_without_manifest_is_a_user_error(capsys):
     assert "MANIFEST" in capsys.readouterr().err
 
 
+def test_a_record_too_slow_to_compare_is_a_user_error(tmp_path, capsys):
+    t = np.arange(256) / 100.0  # 100 Hz: Nyquist 50 Hz, the model starts at 48.7 Hz
+    np.savez(tmp_path / "fe.npz", time_s=t, following_error_m=np.zeros(256))
+    m = _manifest(
+        tmp_path, '[[recording]]\npath = "fe.npz"\nkind = "following-error"\n'
+    )
+    assert main(["diagnose", str(m), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no frequencies to compare" in err, err
+
+
 # ------------------------------------------------------------------ blind subset
 @pytest.fixture(scope="module")
 def blind(tmp_path_factory):

@@ -216,6 +216,14 @@ def _make_blocks(man: Manifest, ctx: Context, p: ModelParams) -> list:
     blocks = []
     for rec in man.recordings:
         d = rec.data
+        if rec.kind in ("following-error", "cut"):
+            lo, hi = analysis_band(d["fs"], case)
+            if hi <= lo:
+                raise ConfigError(
+                    f"{rec.path}: sampled at {d['fs']:.6g} Hz, which leaves no "
+                    f"frequencies to compare (the model starts at {lo:.6g} Hz); "
+                    f"record faster than {2.5 * lo:.6g} Hz"
+                )
         if rec.kind == "following-error":
             recs = d["records"]
             det = [
