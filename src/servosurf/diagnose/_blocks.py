@@ -125,23 +125,31 @@ def _band_mask(f: np.ndarray, fs: float, case: CaseModel) -> np.ndarray:
     return (f >= lo * (1 - 1e-9)) & (f > 0) & (f < hi * (1 - 1e-9))
 
 
-def on_record_grid(case: CaseModel, t_rec: np.ndarray, simulate) -> dict:
+def on_record_grid(
+    case: CaseModel, t_rec: np.ndarray, simulate, inputs: dict | None = None
+) -> dict:
     """A controller-rate simulation seen at a record's sample times.
 
     The loop runs at the controller rate ``case.fs`` from ``t_rec[0]`` (at rest
-    there) to just past ``t_rec[-1]``; ``simulate(t_ctrl)`` returns its arrays at
-    the controller times, and each is interpolated to ``t_rec`` (s) with a cubic
-    spline. The deterministic responses compared this way (command tracking, the
-    cut's force response) lie far below either Nyquist frequency, where the
-    spline's error is of order ``(2 pi f / fs)^4 / 384`` (5e-5 at 12 kHz and
-    200 kHz); the record's own noise is never resampled.
+    there) to just past ``t_rec[-1]``: ``simulate(t_ctrl, **inputs_ctrl)``
+    returns its arrays at the controller times ``t_ctrl`` (s), given the record's
+    ``inputs`` (arrays at ``t_rec``, or None) splined onto them; each array is
+    interpolated back to ``t_rec`` with a cubic spline. The deterministic
+    responses compared this way (command tracking, the cut's force response) lie
+    far below either Nyquist frequency, where the spline's error is of order
+    ``(2 pi f / fs)^4 / 384`` (5e-5 at 12 kHz and 200 kHz); the record's own
+    noise is never resampled.
     """
     from scipy.interpolate import CubicSpline
 
     t_rec = np.asarray(t_rec, dtype=float)
     m = int(math.floor((t_rec[-1] - t_rec[0]) * case.fs)) + 2
     t_ctrl = t_rec[0] + np.arange(m) / case.fs
-    sim = simulate(t_ctrl)
+    on_ctrl = {
+        k: None if v is None else CubicSpline(t_rec, v)(t_ctrl)
+        for k, v in (inputs or {}).items()
+    }
+    sim = simulate(t_ctrl, **on_ctrl)
     out = {}
     for k, v in sim.items():
         v = np.asarray(v)
@@ -159,21 +167,19 @@ def line_power(
     p: ModelParams,
     freq: np.ndarray,
     n: int,
+    fs: float,
     output: str = "fe",
-    paths_fn=None,
-    fs: float | None = None,
 ) -> np.ndarray:
     """Expected periodogram (one-sided, m^2/Hz) of ``p``'s base lines at the bins.
 
     A line of base amplitude ``a`` at ``f0`` appears in ``output`` with amplitude
     ``A = a |H(f0)|`` and adds ``A^2 / 4 (D(k - k0)^2 + D(k + k0)^2) 2 / (fs n)`` to
     bin k of a rectangular-window periodogram (``D``: Dirichlet kernel) of ``n``
-    samples at ``fs`` Hz (default: the controller rate).
+    samples at ``fs`` Hz.
     """
     out = np.zeros(np.shape(freq))
     if not len(p.line_frequencies):
         return out
-    fs = case.fs if fs is None else float(fs)
     f0 = np.asarray(p.line_frequencies, dtype=float)
     a = np.asarray(p.line_amplitudes, dtype=float)
     h = case.paths(p, f0)[("base", output)]
@@ -347,7 +353,7 @@ class SpectralBlock(Block):
         def run():
             ps = self.ctx.case.paths(p, self.freq)
             s = self.ctx.case.noise_psd(p, self.freq, "fe", paths=ps)
-            return s + line_power(self.ctx.case, p, self.freq, self.nsamp, fs=self.fs)
+            return s + line_power(self.ctx.case, p, self.freq, self.nsamp, self.fs)
 
         return self.ctx.memo((p.key(self.tags), "spec", self.recording), run)
 
@@ -455,16 +461,13 @@ class TimeBlock(Block):
         else:  # the loop at the controller rate, seen at the record's samples
 
             def run():
-                from scipy.interpolate import CubicSpline
-
                 t = rec.get("t0", 0.0) + np.arange(n) / self.fs
-
-                def sim(tc):
-                    rc = CubicSpline(t, ref)(tc)
-                    fc = None if frc is None else CubicSpline(t, frc)(tc)
-                    return case.simulate(p, reference=rc, force=fc)
-
-                return on_record_grid(case, t, sim)
+                return on_record_grid(
+                    case,
+                    t,
+                    lambda tc, **inp: case.simulate(p, **inp),
+                    {"reference": ref, "force": frc},
+                )
 
         key = (p.key(("linear", "nonlin")), "rec", self.recording, i)
         return self.ctx.memo(key, run)
