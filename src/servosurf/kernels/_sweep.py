@@ -78,6 +78,29 @@ TH_LO, TH_HI, TH_FIRST, GSCALE = 10, 11, 12, 13
 N_STAT = 16
 
 
+# The helpers below read the path and bucket arrays through flat row-major views
+# (``pts.reshape(-1)`` etc., made once per kernel call) with unsigned indices: numba
+# then neither multiplies by a run-time row stride nor emits its negative-index
+# wraparound, which took 13 % of a facing sweep on one thread (2026-11-24, fifth
+# session; the indices here are never negative).
+@njit(cache=CACHE, fastmath=FASTMATH, inline="always")
+def _pt(pts, i, k):  # pragma: no cover - numba
+    """``pts[i, k]`` of the flat view of the (n, 4) interleaved path."""
+    return pts[np.uint64(4 * i + k)]
+
+
+@njit(cache=CACHE, fastmath=FASTMATH, inline="always")
+def _bs(bstat, j, k):  # pragma: no cover - numba
+    """``bstat[j, k]`` of the flat view of the (n_buckets, N_STAT) statistics."""
+    return bstat[np.uint64(N_STAT * j + k)]
+
+
+@njit(cache=CACHE, fastmath=FASTMATH, inline="always")
+def _bi(bidx, j, k):  # pragma: no cover - numba
+    """``bidx[j, k]`` of the flat view of the (n_buckets, 4) bucket ranges."""
+    return bidx[np.uint64(4 * j + k)]
+
+
 @njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
 def _bucket_stats(theta, r, z, gap, theta_ref, bidx, bstat):  # pragma: no cover - numba
     """Fill the per-revolution bucket index ranges and bounds.
@@ -192,7 +215,7 @@ def _bisect(theta, target, lo, hi):  # pragma: no cover - numba
     """
     while hi - lo > 1:
         mid = (lo + hi) >> 1
-        if theta[mid] <= target:
+        if theta[np.uint64(mid)] <= target:
             lo = mid
         else:
             hi = mid
@@ -212,8 +235,8 @@ def _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
         Crossing angle, in rad.
     rq : float
         Signed radius of the query point in the arc's plane, in m.
-    pts : ndarray of shape (n, 4)
-        Interleaved path: theta (rad), r (m), z (m) and
+    pts : ndarray of shape (4 n,)
+        Flat view of the (n, 4) interleaved path: theta (rad), r (m), z (m) and
         ``1 / (theta[i + 1] - theta[i])`` (1/rad), which is 0.0 when samples i and
         i + 1 are not consecutive in time (a gap) and for the last sample.
     radius : float
@@ -237,21 +260,21 @@ def _height_at(i, target, rq, pts, radius, half_width, wav, wav_s0,
     not a sphere (a sphere misses the lenslet envelope by micrometres because the
     lenslet curvature along the cut is close to R; PAPER_NOTES.md).
     """
-    inv_dt = pts[i, 3]
+    inv_dt = _pt(pts, i, 3)
     if inv_dt == 0.0:
         return np.inf
-    a = (target - pts[i, 0]) * inv_dt
+    a = (target - _pt(pts, i, 0)) * inv_dt
     if a < 0.0:
         a = 0.0
     elif a > 1.0:
         a = 1.0
-    r0 = pts[i, 1]
-    rc = r0 + a * (pts[i + 1, 1] - r0)
+    r0 = _pt(pts, i, 1)
+    rc = r0 + a * (_pt(pts, i + 1, 1) - r0)
     dr = rq - rc
     if abs(dr) > half_width:
         return np.inf
-    z0 = pts[i, 2]
-    zc = z0 + a * (pts[i + 1, 2] - z0)
+    z0 = _pt(pts, i, 2)
+    zc = z0 + a * (_pt(pts, i + 1, 2) - z0)
     h = zc + (radius - np.sqrt(radius * radius - dr * dr))
     if wav.size > 1:
         u = (dr / radius - wav_s0) * wav_inv_ds
@@ -273,14 +296,14 @@ def _locate_guided(theta, pts, target, j, bidx, bstat):  # pragma: no cover - nu
     ----------
     theta : ndarray of shape (n,)
         Strictly increasing angles, in rad.
-    pts : ndarray of shape (n, 4)
-        Interleaved path (theta in column 0).
+    pts : ndarray of shape (4 n,)
+        Flat view of the (n, 4) interleaved path (theta in column 0).
     target : float
         Angle to bracket, in rad, with ``theta[0] <= target <= theta[-1]``.
     j : int
         Bucket of the target.
     bidx, bstat : ndarray
-        Bucket ranges and statistics from :func:`_bucket_stats`.
+        Flat views of the bucket ranges and statistics from :func:`_bucket_stats`.
 
     Returns
     -------
@@ -288,21 +311,22 @@ def _locate_guided(theta, pts, target, j, bidx, bstat):  # pragma: no cover - nu
         Index i with ``theta[i] <= target < theta[i + 1]`` (``n - 2`` at the end).
     """
     n = theta.size
-    if target < bstat[j, TH_LO] or target >= bstat[j, TH_HI]:
+    if target < _bs(bstat, j, TH_LO) or target >= _bs(bstat, j, TH_HI):
         return _bisect(theta, target, 0, n - 1)
-    lo = bidx[j, 0]
-    hi = bidx[j, 1]
+    lo = _bi(bidx, j, 0)
+    hi = _bi(bidx, j, 1)
     # Interpolation guess from the samples inside the bucket; uniform sampling lands
     # within one step.
-    g = bidx[j, 2] + int((target - bstat[j, TH_FIRST]) * bstat[j, GSCALE])
+    g = _bi(bidx, j, 2) + int((target - _bs(bstat, j, TH_FIRST))
+                              * _bs(bstat, j, GSCALE))
     if g < lo:
         g = lo
     elif g > hi - 1:
         g = hi - 1
     for _ in range(4):
-        if pts[g, 0] > target:
+        if _pt(pts, g, 0) > target:
             g -= 1
-        elif pts[g + 1, 0] <= target:
+        elif _pt(pts, g + 1, 0) <= target:
             g += 1
         else:
             return g
@@ -326,7 +350,7 @@ def _envelope_exhaustive(phi, rq, h0, theta, pts, bidx, bstat, theta_ref, radius
     theta : ndarray of shape (n,)
         Path angle, in rad (contiguous, for binary searches).
     pts, radius, half_width, wav, wav_s0, wav_inv_ds : see :func:`_height_at`.
-    bidx, bstat, theta_ref : see :func:`_bucket_stats`.
+    bidx, bstat, theta_ref : see :func:`_bucket_stats` (flat views of the arrays).
     wav_bound : float
         Upper bound of the waviness correction, in m (0 without waviness).
     slack : float
@@ -344,7 +368,7 @@ def _envelope_exhaustive(phi, rq, h0, theta, pts, bidx, bstat, theta_ref, radius
     whole path. No ordering and no early exit: the baseline for the pruned kernel.
     """
     n = theta.size
-    nb = bidx.shape[0]
+    nb = bidx.size // 4
     # Absolute revolution number of bucket 0's crossing: targets phi + 2 pi (m0 + j)
     # do not depend on theta_ref, so tiles reproduce whole-field runs bit for bit.
     m0 = np.ceil((theta_ref - phi) / TWO_PI)
@@ -353,10 +377,10 @@ def _envelope_exhaustive(phi, rq, h0, theta, pts, bidx, bstat, theta_ref, radius
     t_last = theta[n - 1]
     best = h0
     for j in range(nb):
-        d = max(bstat[j, RLO] - rq, rq - bstat[j, RHI], 0.0)
+        d = max(_bs(bstat, j, RLO) - rq, rq - _bs(bstat, j, RHI), 0.0)
         if d > half_width:
             continue
-        if bstat[j, ZLO] + d * d * inv2r - wav_bound - slack >= h0:
+        if _bs(bstat, j, ZLO) + d * d * inv2r - wav_bound - slack >= h0:
             continue
         target = phi + TWO_PI * (m0 + j)
         if target < t_first or target > t_last:
@@ -436,7 +460,7 @@ def _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width, wav,
     """
     target = phi + TWO_PI * (m0 + j)
     # common case first: inside the bucket's sample range, hence inside the path
-    if not (target >= bstat[j, TH_LO] and target < bstat[j, TH_HI]):
+    if not (target >= _bs(bstat, j, TH_LO) and target < _bs(bstat, j, TH_HI)):
         if target < theta[0] or target > theta[theta.size - 1]:
             return np.inf
     i = _locate_guided(theta, pts, target, j, bidx, bstat)
@@ -477,17 +501,17 @@ def _walk_pruned(phi, m0, rq, best, j0, theta, pts, bidx, bstat, radius, half_wi
     bound adds only a crossing that cannot be below a bound it does not beat: the
     result is the exhaustive kernel's, crossing for crossing.
     """
-    nb = bidx.shape[0]
+    nb = bidx.size // 4
     inv2r = 0.5 / radius
     j = j0 + 1
     while j < nb:
-        d = max(bstat[j, SUF_RLO] - rq, rq - bstat[j, SUF_RHI], 0.0)
+        d = max(_bs(bstat, j, SUF_RLO) - rq, rq - _bs(bstat, j, SUF_RHI), 0.0)
         if d > half_width:
             break
-        if bstat[j, SUF_ZLO] + d * d * inv2r - wav_bound - slack >= best:
+        if _bs(bstat, j, SUF_ZLO) + d * d * inv2r - wav_bound - slack >= best:
             break
-        d = max(bstat[j, RLO] - rq, rq - bstat[j, RHI], 0.0)
-        if d <= half_width and bstat[j, ZLO] + d * d * inv2r - wav_bound - slack < best:
+        d = max(_bs(bstat, j, RLO) - rq, rq - _bs(bstat, j, RHI), 0.0)
+        if d <= half_width and _bs(bstat, j, ZLO) + d * d * inv2r - wav_bound - slack < best:
             h = _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width,
                           wav, wav_s0, wav_inv_ds)
             if h < best:
@@ -495,13 +519,13 @@ def _walk_pruned(phi, m0, rq, best, j0, theta, pts, bidx, bstat, radius, half_wi
         j += 1
     j = j0 - 1
     while j >= 0:
-        d = max(bstat[j, PRE_RLO] - rq, rq - bstat[j, PRE_RHI], 0.0)
+        d = max(_bs(bstat, j, PRE_RLO) - rq, rq - _bs(bstat, j, PRE_RHI), 0.0)
         if d > half_width:
             break
-        if bstat[j, PRE_ZLO] + d * d * inv2r - wav_bound - slack >= best:
+        if _bs(bstat, j, PRE_ZLO) + d * d * inv2r - wav_bound - slack >= best:
             break
-        d = max(bstat[j, RLO] - rq, rq - bstat[j, RHI], 0.0)
-        if d <= half_width and bstat[j, ZLO] + d * d * inv2r - wav_bound - slack < best:
+        d = max(_bs(bstat, j, RLO) - rq, rq - _bs(bstat, j, RHI), 0.0)
+        if d <= half_width and _bs(bstat, j, ZLO) + d * d * inv2r - wav_bound - slack < best:
             h = _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width,
                           wav, wav_s0, wav_inv_ds)
             if h < best:
@@ -620,6 +644,10 @@ def _sweep_exhaustive(theta, pts, bidx, bstat, theta_ref, radius, half_width,
     Implements the planar-arc envelope of the seed paper's lenslet cutting (section 4.2,
     Table 2: round diamond tool, R = 0.5 mm) for arbitrary sampled paths.
     """
+    # flat views for the helpers' unsigned indexing (see _pt)
+    pts = pts.reshape(pts.size)
+    bidx = bidx.reshape(bidx.size)
+    bstat = bstat.reshape(bstat.size)
     ny, nx = out.shape
     for row in prange(ny):
         y = y0 + (row0 + row) * dy
@@ -680,6 +708,10 @@ def _sweep_pruned(theta, pts, bidx, bstat, rmid, theta_ref, radius, half_width, 
     from :func:`_row_polar` (exact ``arctan2`` every :data:`ANCHOR` columns and a
     series in between), shared with :func:`_sweep_exhaustive`.
     """
+    # flat views for the helpers' unsigned indexing (see _pt)
+    pts = pts.reshape(pts.size)
+    bidx = bidx.reshape(bidx.size)
+    bstat = bstat.reshape(bstat.size)
     ny, nx = out.shape
     for row in prange(ny):
         y = y0 + (row0 + row) * dy
