@@ -14,7 +14,7 @@
    ``explained``; terms selected and something left: ``partly-explained``
    (``unexplained`` when the terms explain less than 30 % of the mismatch);
    nothing selected but a mismatch: ``unexplained``, with where it is. A
-   recalibration (moving mass, flexure, force constant) is reported as such but
+   recalibration (moving mass, flexure, force constant, sensor bandwidth) is reported as such but
    is not an explanation by missing physics: alone it gives ``unexplained``.
 """
 
@@ -353,6 +353,7 @@ def _locations(
         "flexure_stiffness": m.mechanics.k2,
         "flexure_damping": max(m.mechanics.c2, 1e-3),
         "force_constant": m.actuator.force_constant,
+        "sensor_bandwidth": m.sensor.bandwidth,
     }
     loc.kinds = {b.kind for b in blocks}
     if spec is not None and spec.kind == "lenslet":
