@@ -14,8 +14,9 @@
    ``explained``; terms selected and something left: ``partly-explained``
    (``unexplained`` when the terms explain less than 30 % of the mismatch);
    nothing selected but a mismatch: ``unexplained``, with where it is. A
-   recalibration (moving mass, flexure, force constant, sensor bandwidth) is reported as such but
-   is not an explanation by missing physics: alone it gives ``unexplained``.
+   recalibration (moving mass, flexure, force constant, sensor bandwidth) is
+   reported as such but is not an explanation by missing physics: alone it gives
+   ``unexplained``.
 """
 
 from __future__ import annotations
