@@ -18,7 +18,8 @@ def _nominal():
 
 def _with_fixed_gains(m, pidf):
     """The machine with the controller gains of ``pidf`` written in (not redesigned)."""
-    c = dataclasses.replace(m.controller, kp=pidf.kp, ki=pidf.ki, kd=pidf.kd, tf=pidf.tf)
+    c = dataclasses.replace(m.controller, kp=pidf.kp, ki=pidf.ki, kd=pidf.kd,
+                            tf=pidf.tf)
     return dataclasses.replace(m, controller=c)
 
 

@@ -1048,7 +1048,9 @@ class ElasticRecovery(Effect):
     )
     channels = ("surface", "profile")
     tags = ("tool",)
-    params = (ParamDoc("recovery", "1", "fraction eps >= 0 of the depth that springs back"),)
+    params = (
+        ParamDoc("recovery", "1", "fraction eps >= 0 of the depth that springs back"),
+    )
 
     def active(self, p):
         return p.recovery != 0.0

@@ -511,7 +511,8 @@ def _walk_pruned(phi, m0, rq, best, j0, theta, pts, bidx, bstat, radius, half_wi
         if _bs(bstat, j, SUF_ZLO) + d * d * inv2r - wav_bound - slack >= best:
             break
         d = max(_bs(bstat, j, RLO) - rq, rq - _bs(bstat, j, RHI), 0.0)
-        if d <= half_width and _bs(bstat, j, ZLO) + d * d * inv2r - wav_bound - slack < best:
+        if (d <= half_width
+                and _bs(bstat, j, ZLO) + d * d * inv2r - wav_bound - slack < best):
             h = _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width,
                           wav, wav_s0, wav_inv_ds)
             if h < best:
@@ -525,7 +526,8 @@ def _walk_pruned(phi, m0, rq, best, j0, theta, pts, bidx, bstat, radius, half_wi
         if _bs(bstat, j, PRE_ZLO) + d * d * inv2r - wav_bound - slack >= best:
             break
         d = max(_bs(bstat, j, RLO) - rq, rq - _bs(bstat, j, RHI), 0.0)
-        if d <= half_width and _bs(bstat, j, ZLO) + d * d * inv2r - wav_bound - slack < best:
+        if (d <= half_width
+                and _bs(bstat, j, ZLO) + d * d * inv2r - wav_bound - slack < best):
             h = _crossing(j, phi, m0, rq, theta, pts, bidx, bstat, radius, half_width,
                           wav, wav_s0, wav_inv_ds)
             if h < best:
