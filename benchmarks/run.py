@@ -76,12 +76,7 @@ def case(name: str):
 
 def best_time(fn, repeat=3):
     """Best wall time of ``repeat`` calls, in s."""
-    best = math.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+    return time_stats(fn, repeat)[0]
 
 
 def time_stats(fn, repeat=3):

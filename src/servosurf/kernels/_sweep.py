@@ -81,8 +81,8 @@ N_STAT = 16
 # The helpers below read the path and bucket arrays through flat row-major views
 # (``pts.reshape(-1)`` etc., made once per kernel call) with unsigned indices: numba
 # then neither multiplies by a run-time row stride nor emits its negative-index
-# wraparound, which took 13 % of a facing sweep on one thread (2026-11-24, fifth
-# session; the indices here are never negative).
+# wraparound, which took 12 % of the facing kernel's CPU time on one thread
+# (2026-11-24, fifth session; the indices here are never negative).
 @njit(cache=CACHE, fastmath=FASTMATH, inline="always")
 def _pt(pts, i, k):  # pragma: no cover - numba
     """``pts[i, k]`` of the flat view of the (n, 4) interleaved path."""
