@@ -108,3 +108,197 @@ def test_weak_remainder_does_not_make_a_verdict():
     assert _verdict(True, False, [weak], 50.0, 0.0) == "explained"
     assert _verdict(True, False, [strong], 50.0, 10.0) == "partly-explained"
     assert _verdict(True, False, [strong], 5.0, 50.0) == "unexplained"
+
+
+# ------------------------------------------------------------------ base lines
+def _lines_effect():
+    from servosurf.diagnose._catalogue import BaseLines
+
+    return BaseLines()
+
+
+def test_line_idle_bar_follows_what_the_idle_records_can_see():
+    from servosurf.diagnose._sim import ModelParams
+
+    eff = _lines_effect()
+    fixed = eff.require[1]
+    loc = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3050.4])
+    p = ModelParams(line_frequencies=(3050.0,), line_amplitudes=(1e-7,))
+    for expected in (0.0, 1.0, 9.0, 16.0, 25.0, 36.0, 400.0):
+        want = min(fixed, expected - 4.0 * math.sqrt(expected))
+        assert eff.channel_bar(p, 0, loc, expected) == want
+    assert eff.channel_bar(p, 0, loc, 400.0) == fixed
+    assert eff.channel_bar(p, 0, loc, 1.0) < 0.0
+    # the lower bar needs the line to be found on a map or profile
+    far = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3052.0])
+    assert eff.channel_bar(p, 0, far, 1.0) == fixed
+    assert eff.channel_bar(p, 0, Locations(fs=2e5, fts=100.0), 1.0) == fixed
+
+
+def test_sidebands_of_an_accepted_line_keep_the_fixed_bar():
+    from servosurf.diagnose._sim import ModelParams
+
+    eff = _lines_effect()
+    fixed = eff.require[1]
+    found = [3050.0 + k * 100.0 + 4.0 for k in (-3, -2, -1, 1, 2, 3)] + [3230.0, 3150]
+    loc = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=found)
+    for k in (-3, -2, -1, 1, 2, 3):
+        p = ModelParams(line_frequencies=(3050.0, 3050.0 + k * 100.0 + 4.0),
+                        line_amplitudes=(1e-7, 1e-8))
+        assert eff.channel_bar(p, 1, loc, 1.0) == fixed
+    # 20 Hz off every sideband and harmonic: a line of its own, judged on what
+    # the idle records can see
+    p = ModelParams(line_frequencies=(3050.0, 3230.0), line_amplitudes=(1e-7, 1e-8))
+    assert eff.channel_bar(p, 1, loc, 1.0) == 1.0 - 4.0
+    # harmonics of the lenslet motion (a hysteresis locked to the FTS puts lines
+    # there) need the idle records too, alone or beside another line
+    for f in (400.3, 998.0):
+        loc_h = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[f])
+        assert eff.channel_bar(ModelParams(line_frequencies=(f,),
+                                           line_amplitudes=(1e-9,)), 0, loc_h,
+                               1.0) == fixed
+    loc_h = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[430.0])
+    assert eff.channel_bar(ModelParams(line_frequencies=(430.0,),
+                                       line_amplitudes=(1e-9,)), 0, loc_h,
+                           1.0) == 1.0 - 4.0
+    # without a lenslet toolpath there are no sidebands
+    loc0 = Locations(fs=2e5, record_length=4096, fts=0.0, map_line_freqs=found)
+    p = ModelParams(line_frequencies=(3050.0, 3150.0), line_amplitudes=(1e-7, 1e-8))
+    assert eff.channel_bar(p, 1, loc0, 1.0) == 1.0 - 4.0
+
+
+class _IdleBlock:
+    domain = "spectrum"
+    tags = ("lines",)
+
+    def __init__(self, data, template):
+        self.data, self.template, self.n = data, template, data.size
+
+    def residual(self, p):
+        a = sum(p.line_amplitudes) if p.line_amplitudes else 0.0
+        return self.data - a * self.template
+
+
+def _channel(data, template):
+    from servosurf.diagnose._sim import ModelParams
+
+    eff = _lines_effect()
+    loc = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3050.0])
+    eng = Engine([_IdleBlock(data, template)], loc, [eff], lambda p: [])
+    q = ModelParams(line_frequencies=(3050.0,), line_amplitudes=(1.0,))
+    return eng._channel_ok(eff, q, Term(eff, 0))
+
+
+def test_channel_logic_judges_a_line_by_its_own_idle_prediction():
+    rng = np.random.default_rng(5)
+    n = 2000
+    noise = rng.standard_normal(n)
+    shape = rng.standard_normal(n)
+    shape /= np.linalg.norm(shape)
+    strong, faint = 10.0 * shape, 1.0 * shape  # expected idle gain 100 and 1
+    # visible at idle and there: admitted; visible at idle and absent: refused
+    assert _channel(noise + strong, strong)
+    assert not _channel(noise, strong)
+    # a line the idle records cannot see (a 3 kHz base line the loop keeps out of
+    # the following error) is not refused for their silence
+    assert _channel(noise, faint)
+
+
+class _TimeRec:
+    domain = "time"
+    tags = ("lines",)
+    fs = 2e5
+    n = 32768
+    records = [{"fe": np.zeros(32768)}]  # 0.164 s
+
+
+class _Profile:
+    domain = "profile"
+    tags = ("lines",)
+    n = 200
+    tpass = np.linspace(0.0, 1.49, 200)  # one revolution of a ring
+
+
+def _scan(f_true, f_noise, located, lines=(), blind=True):
+    from servosurf.diagnose._sim import ModelParams
+
+    loc = Locations(fs=2e5, record_length=4096, fts=100.0,
+                    map_line_freqs=list(located))
+    eng = Engine([_TimeRec(), _Profile()], loc, [], lambda p: [])
+    p = ModelParams(line_frequencies=tuple(lines) + (f_noise,),
+                    line_amplitudes=(1e-7,) * (len(lines) + 1))
+    slot = len(lines)
+
+    def with_f(f):
+        t = list(p.line_frequencies)
+        t[slot] = float(f)
+        return p.replace(line_frequencies=tuple(t))
+
+    def dev(q, which):
+        f = q.line_frequencies[slot]
+        # the time records barely see the line: their minimum is noise, 30 Hz off;
+        # the profile's minimum is sharp (1/T of a 1.49 s revolution) at the truth
+        d = 5.0 * (1.0 - math.exp(-(((f - f_noise) / 20.0) ** 2)))
+        if 1 in which:
+            d += 1e3 * (1.0 - math.exp(-(((f - f_true) / 0.3) ** 2)))
+        return d
+
+    df = loc.fs / loc.record_length
+    return eng._scan_line(p, f_noise, df, with_f, dev, slot,
+                          list(located) if blind else [])
+
+
+def test_line_search_starts_from_the_maps_peaks_when_time_records_are_blind():
+    f_true = 3050.69
+    # stage 1 lands on the time records' noise minimum (f_true - 30 Hz); the
+    # located map peak (0.4 Hz off) brings the refinement to the truth
+    best = _scan(f_true, f_true - 30.0, [f_true + 0.4, f_true + 100.5])
+    assert abs(best - f_true) < 0.1
+    # a located peak on another line of the model is not a start (closer than the
+    # 1.49 s profile resolves: one line split in two)
+    other = _scan(f_true, f_true + 60.0, [f_true + 0.4], lines=(f_true + 0.2,))
+    assert abs(other - f_true) > 1.0 / 1.49
+    # a line the idle records can confirm keeps the time records' frequency
+    seen = _scan(f_true, f_true - 30.0, [f_true + 0.4], blind=False)
+    assert abs(seen - (f_true - 30.0)) < 2.0
+
+
+def test_idle_blindness_is_the_lines_own_idle_gain_against_the_bar():
+    from servosurf.diagnose._sim import ModelParams
+
+    eff = _lines_effect()
+    rng = np.random.default_rng(8)
+    shape = rng.standard_normal(500)
+    shape /= np.linalg.norm(shape)
+    p = ModelParams(line_frequencies=(3050.0,), line_amplitudes=(1.0,))
+    for gain, blind in ((1.0, True), (8.9, True), (9.1, False), (100.0, False)):
+        blk = _IdleBlock(rng.standard_normal(500), math.sqrt(gain) * shape)
+        eng = Engine([blk], Locations(fs=2e5), [eff], lambda p: [])
+        assert eng._idle_blind(p, Term(eff, 0)) is blind
+    # no idle records: nothing can confirm the line
+    eng = Engine([_Profile()], Locations(fs=2e5), [eff], lambda p: [])
+    assert eng._idle_blind(p, Term(eff, 0)) is True
+
+
+def test_map_starts_exclude_lines_locked_to_the_fts_motion():
+    from servosurf.diagnose._sim import ModelParams
+
+    eff = _lines_effect()
+    loc = Locations(fs=2e5, record_length=4096, fts=100.0,
+                    map_line_freqs=[149.7, 200.2, 3051.1])
+    eng = Engine([_Profile()], loc, [eff], lambda p: [])
+    seen = {}
+
+    def scan(p, f0, df, with_f, dev, slot, starts):
+        seen["starts"] = list(starts)
+        return f0
+
+    eng._scan_line = scan
+    eng.deviance = lambda q: 0.0
+    p = ModelParams(line_frequencies=(49.99, 2950.6), line_amplitudes=(1e-9, 1e-7))
+    eng.line_frequency_search(p, Term(eff, 1))
+    # 149.7 = 49.99 + f_FTS (a sideband), 200.2 = 2 f_FTS (a harmonic)
+    assert seen["starts"] == [3051.1]
+    eng._idle_blind = lambda p, term: False
+    eng.line_frequency_search(p, Term(eff, 1))
+    assert seen["starts"] == []

@@ -84,6 +84,9 @@ class Locations:
         Candidate resonance frequencies, Hz.
     line_freqs : list of float
         Candidate line frequencies, Hz.
+    map_line_freqs : list of float
+        Line frequencies found significant on maps or profiles (the locator's
+        frequency search is Bonferroni-corrected), Hz.
     orders : list of int
         Candidate spindle orders (undulations per revolution).
     record_length : float
@@ -106,6 +109,7 @@ class Locations:
     current_levels: list = field(default_factory=list)
     mode_freqs: list = field(default_factory=list)
     line_freqs: list = field(default_factory=list)
+    map_line_freqs: list = field(default_factory=list)
     orders: list = field(default_factory=list)
     record_length: float = 4096
     line_probe: object = None
@@ -149,6 +153,15 @@ class Effect:
     def n_params(self, cfg: Config | None = None) -> int:
         """Parameters counted by the selection criterion per term."""
         return len(self.params)
+
+    def channel_bar(self, p, slot: int, loc: Locations, expected: float) -> float:
+        """Deviance reduction the ``require`` blocks must show for term ``slot``.
+
+        ``expected`` is the reduction the term predicts there if it is true (the
+        squared whitened change it makes in those blocks). The default is the
+        fixed bar of ``require``.
+        """
+        return self.require[1]
 
     def slots(self, p: ModelParams) -> int:
         """Number of terms of this module in ``p``."""
@@ -398,6 +411,59 @@ class BaseLines(Effect):
     #: present with the spindle stopped): its deviance reduction there must exceed
     #: this (chi2(2) at about p = 0.01)
     require = ("spectrum", 9.0)
+
+    #: a line within this share of the FTS frequency of ``g + k f_FTS`` (g an
+    #: accepted line or 0 Hz) is a sideband or a harmonic of the lenslet motion:
+    #: the idle records must confirm it
+    sideband_tolerance = 0.05
+    #: harmonics of the FTS frequency and sidebands of a line treated as locked to
+    #: the lenslet motion (the gate's sidebands fall off with k)
+    max_harmonic = 10
+    max_sideband = 3
+    #: a line is "found on the maps" within this many Hz of a located map line (the
+    #: located peak is a periodogram bin of a ring, 1 / 1.5 s wide)
+    map_tolerance = 1.0
+
+    def channel_bar(self, p, slot, loc, expected):
+        """Idle confirmation a line needs: the fixed bar where the idle records can
+        see it, less where they cannot.
+
+        A true line reduces the idle deviance by ``expected`` +- ``2 sqrt(expected)``
+        (one standard deviation), so the bar is ``min(bar, expected - 4
+        sqrt(expected))``: a high-frequency base line the loop keeps out of the
+        following error (or a line the 20 ms idle records do not resolve) is then
+        judged on the maps and profiles where it shows, and a line the idle
+        records should see but do not is still refused. The lower bar needs
+        evidence of its own: the line must have been found significant on a map
+        or profile by the locator (whose frequency search is corrected for the
+        number of frequencies tried), otherwise the fixed bar stands. Harmonics
+        ``k f_FTS`` and sidebands ``g + k f_FTS`` of an accepted line ``g`` keep
+        the fixed bar too: on a lenslet surface anything locked to the FTS motion
+        (a nonlinearity, hysteresis) and the gating of a real line put lines there
+        without a base line at that frequency.
+        """
+        bar = self.require[1]
+        f = p.line_frequencies[slot]
+        if all(abs(f - g) > self.map_tolerance for g in loc.map_line_freqs):
+            return bar
+        if self.locked_to_fts(f, p, slot, loc):
+            return bar
+        return min(bar, expected - 4.0 * math.sqrt(max(expected, 0.0)))
+
+    def locked_to_fts(self, f: float, p, slot: int, loc: Locations) -> bool:
+        """Whether ``f`` (Hz) is a harmonic ``k f_FTS`` (k = 1..``max_harmonic``) or
+        a sideband ``g + k f_FTS`` (0 < |k| <= ``max_sideband``) of a line ``g`` of
+        ``p`` other than ``slot``."""
+        if loc.fts <= 0:
+            return False
+        tol = self.sideband_tolerance * loc.fts
+        others = [g for j, g in enumerate(p.line_frequencies) if j != slot]
+        for g, kmax in [(0.0, self.max_harmonic)] + [(g, self.max_sideband)
+                                                      for g in others]:
+            k = round((f - g) / loc.fts)
+            if 0 < abs(k) <= kmax and abs(f - g - k * loc.fts) <= tol:
+                return True
+        return False
 
     def active(self, p):
         return len(p.line_frequencies) > 0

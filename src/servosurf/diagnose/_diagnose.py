@@ -304,11 +304,13 @@ def _locations(
             ]
     loc.record_length = rec_len
     # modes and lines from the located mismatch
-    modes, lines, orders = [], [], []
+    modes, lines, orders, map_lines = [], [], [], []
     for mm in mism:
         f = mm.details.get("frequency_hz")
         if mm.test == "line" and f is not None:
             lines.append((mm.significance, f))
+            if mm.domain in ("surface", "profile"):
+                map_lines.append(f)
         if f is not None and f > 500 and mm.domain in ("frf", "time", "spectrum"):
             modes.append(f)
         if "band_hz" in mm.details and mm.domain in ("frf", "spectrum", "time"):
@@ -340,6 +342,7 @@ def _locations(
         if all(abs(f - g) > 1.0 for g in lu):
             lu.append(f)
     loc.line_freqs = lu[:16]
+    loc.map_line_freqs = sorted(set(map_lines))
     loc.orders = list(dict.fromkeys(orders + [1, 2, 3]))[:8]
     d = m.disturbances.sensor_noise
     from ..noise import evaluate_psd
@@ -546,6 +549,7 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
         new = _locations(case, blocks, locate(blocks, p, refs), ctx)
         new.current_levels = loc.current_levels or new.current_levels
         new.line_freqs = list(dict.fromkeys(new.line_freqs + loc.line_freqs))[:16]
+        new.map_line_freqs = sorted(set(new.map_line_freqs + loc.map_line_freqs))
         return new
 
     eng = Engine(blocks0, loc, effs, lambda p: _rebuild(blocks0, ctx, man, p), relocate)

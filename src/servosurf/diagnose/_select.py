@@ -302,7 +302,10 @@ class Engine:
         The deviance of long coherent records oscillates in frequency with period
         ``1/T``; a local solver started a bin away would stop in a side minimum.
         Stage 1 scans +-1.5 idle bins at ``1/(4 T)`` of the time records; stage 2
-        refines at ``1/(8 T)`` of the longest map or profile.
+        refines on every block at ``1/(6 T)`` of the longest map or profile around
+        the stage-1 frequency, its FTS sidebands and, when the idle records cannot
+        confirm the line (:meth:`_idle_blind`), the lines located on the maps
+        within reach that are not locked to the FTS motion.
         """
         i = term.slot
         f0 = p.line_frequencies[i]
@@ -321,11 +324,33 @@ class Engine:
                 tot += float(r @ r)
             return tot
 
-        best = self._scan_line(p, f0, df, with_f, dev)
+        # where the idle records cannot confirm the line, the lines located on the
+        # maps are starts too (not those locked to the FTS motion: they would need
+        # the idle records)
+        eff = term.effect
+        starts = [
+            g for g in self.loc.map_line_freqs
+            if not eff.locked_to_fts(g, p, i, self.loc)
+        ] if self._idle_blind(p, term) else []
+        best = self._scan_line(p, f0, df, with_f, dev, i, starts)
         q = with_f(best)
         return q if self.deviance(q) <= self.deviance(p) else p
 
-    def _scan_line(self, p, f0, df, with_f, dev) -> float:
+    def _idle_blind(self, p: ModelParams, term: Term) -> bool:
+        """Whether the idle records cannot confirm the term as started in ``p``:
+        the deviance it would gain there if true is below the channel bar (or
+        there are no idle records)."""
+        idx = [k for k, b in enumerate(self.blocks) if b.domain == "spectrum"]
+        if not idx or term.effect.require is None:
+            return True
+        without = term.effect.remove(p, term.slot)
+        gain = 0.0
+        for k in idx:
+            d = self.block_residual(k, without) - self.block_residual(k, p)
+            gain += float(d @ d)
+        return gain < term.effect.require[1]
+
+    def _scan_line(self, p, f0, df, with_f, dev, slot: int, starts) -> float:
         time_blocks = [
             k
             for k, b in enumerate(self.blocks)
@@ -347,10 +372,24 @@ class Engine:
                 if self.loc.fts > 0
                 else [best]
             )
+            # ``starts`` near f0 too (the lines located on the maps, where the idle
+            # records cannot see the line: a high-frequency base line the loop
+            # keeps out of the following error leaves the time records' minimum
+            # to noise, and the maps' own peaks are the better start). A line the
+            # idle records do see keeps their frequency (a map peak near it may be
+            # another line's sideband, which the channel logic would refuse).
+            reach = 1.5 * df + 2.0 * self.loc.fts
+            centres += [g for g in starts if abs(g - f0) <= reach]
+            # not onto another line of the model: two lines closer than the longest
+            # record resolves are one line split in two
+            others = [g for j, g in enumerate(p.line_frequencies) if j != slot]
+            centres = [c for c in centres if all(abs(c - g) > 1.0 / t2 for g in others)]
             cands = []
+            done: list[float] = []
             for c in centres:
-                if c <= 1.0:
+                if c <= 1.0 or any(abs(c - d) < 1.0 / (6 * t1) for d in done):
                     continue
+                done.append(c)
                 fine = np.arange(c - 1.0 / (6 * t1), c + 1.0 / (6 * t1), 1.0 / (6 * t2))
                 fb = min(fine, key=lambda f: dev(with_f(f), all_blocks))
                 cands.append((dev(with_f(fb), all_blocks), fb))
@@ -374,11 +413,14 @@ class Engine:
         if not idx:
             return True
         without = eff.remove(q, term.slot)
-
-        def dev(m):
-            return sum(float(r @ r) for r in (self.block_residual(i, m) for i in idx))
-
-        return dev(without) - dev(q) >= dmin
+        r_with = [self.block_residual(i, q) for i in idx]
+        r_without = [self.block_residual(i, without) for i in idx]
+        observed = sum(float(a @ a) - float(b @ b) for a, b in zip(
+            r_without, r_with, strict=True))
+        # what the term itself says those blocks should gain if it is true
+        expected = sum(float((a - b) @ (a - b)) for a, b in zip(
+            r_without, r_with, strict=True))
+        return observed >= eff.channel_bar(q, term.slot, self.loc, expected)
 
     def level_search(self, p: ModelParams, eff: Effect, term: Term) -> ModelParams:
         """Best level of a threshold module: deviance at every configuration, then
