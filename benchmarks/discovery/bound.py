@@ -186,7 +186,7 @@ def table(s: dict) -> str:
             f"| {enr} | {d['n']} | {d['median_snr']:.2f} | {d['cases_snr_below_3']} "
             f"| {d['bound_top1']:.0%} | {d['composite_top1']:.0%} | "
             f"{'' if ob is None else f'{ob:.0%}'} | "
-            f"{'x%.1f' % k if math.isfinite(k) else '> x1e4'} |"
+            f"{f'x{k:.1f}' if math.isfinite(k) else '> x1e4'} |"
         )
     enrs = list(s["by_enr"])
     lines += [
