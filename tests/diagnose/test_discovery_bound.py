@@ -8,23 +8,15 @@ distribution and a seeded Monte-Carlo.
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.stats import chi2, norm
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "discovery"
-
 
 @pytest.fixture(scope="module")
-def B():
-    if str(BENCH) not in sys.path:
-        sys.path.insert(0, str(BENCH))
-    import bound
-
-    return bound
+def B(discovery):
+    return discovery("bound")
 
 
 def test_np_bound_is_the_shifted_normal(B):

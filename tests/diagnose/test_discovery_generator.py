@@ -6,22 +6,13 @@ does what the misspecified-noise nulls claim: it multiplies the named source PSD
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "discovery"
-
 
 @pytest.fixture(scope="module")
-def C():
-    if str(BENCH) not in sys.path:
-        sys.path.insert(0, str(BENCH))
-    import cases
-
-    return cases
+def C(discovery):
+    return discovery("cases")
 
 
 def _scale(par):
