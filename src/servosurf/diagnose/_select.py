@@ -336,19 +336,30 @@ class Engine:
         q = with_f(best)
         return q if self.deviance(q) <= self.deviance(p) else p
 
+    def _required_gain(self, eff: Effect, q: ModelParams, slot: int):
+        """``(observed, expected)`` deviance reduction of term ``slot`` of ``q`` in
+        the blocks of ``eff.require``'s domain (None without such blocks):
+        observed on the data, expected if the term is true (the squared whitened
+        change it makes there)."""
+        if eff.require is None:
+            return None
+        idx = [i for i, b in enumerate(self.blocks) if b.domain == eff.require[0]]
+        if not idx:
+            return None
+        without = eff.remove(q, slot)
+        observed = expected = 0.0
+        for i in idx:
+            a, b = self.block_residual(i, without), self.block_residual(i, q)
+            observed += float(a @ a) - float(b @ b)
+            expected += float((a - b) @ (a - b))
+        return observed, expected
+
     def _idle_blind(self, p: ModelParams, term: Term) -> bool:
-        """Whether the idle records cannot confirm the term as started in ``p``:
-        the deviance it would gain there if true is below the channel bar (or
-        there are no idle records)."""
-        idx = [k for k, b in enumerate(self.blocks) if b.domain == "spectrum"]
-        if not idx or term.effect.require is None:
-            return True
-        without = term.effect.remove(p, term.slot)
-        gain = 0.0
-        for k in idx:
-            d = self.block_residual(k, without) - self.block_residual(k, p)
-            gain += float(d @ d)
-        return gain < term.effect.require[1]
+        """Whether the channel's blocks (the idle records of a line) cannot confirm
+        the term as started in ``p``: the gain it would make there if true is
+        below the fixed channel bar, or there are no such blocks."""
+        g = self._required_gain(term.effect, p, term.slot)
+        return g is None or g[1] < term.effect.require[1]
 
     def _scan_line(self, p, f0, df, with_f, dev, slot: int, starts) -> float:
         time_blocks = [
@@ -406,20 +417,10 @@ class Engine:
 
     def _channel_ok(self, eff: Effect, q: ModelParams, term: Term) -> bool:
         """Channel logic: the term must show where its physics says it must."""
-        if eff.require is None:
+        g = self._required_gain(eff, q, term.slot)
+        if g is None:
             return True
-        dom, dmin = eff.require
-        idx = [i for i, b in enumerate(self.blocks) if b.domain == dom]
-        if not idx:
-            return True
-        without = eff.remove(q, term.slot)
-        r_with = [self.block_residual(i, q) for i in idx]
-        r_without = [self.block_residual(i, without) for i in idx]
-        observed = sum(float(a @ a) - float(b @ b) for a, b in zip(
-            r_without, r_with, strict=True))
-        # what the term itself says those blocks should gain if it is true
-        expected = sum(float((a - b) @ (a - b)) for a, b in zip(
-            r_without, r_with, strict=True))
+        observed, expected = g
         return observed >= eff.channel_bar(q, term.slot, self.loc, expected)
 
     def level_search(self, p: ModelParams, eff: Effect, term: Term) -> ModelParams:
