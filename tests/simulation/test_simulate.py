@@ -67,6 +67,32 @@ def test_force_deviation_scales_with_thrust_pressure(small_lens):
     assert a.max() > 0
 
 
+def test_force_deviation_is_the_loop_response_to_the_force(small_lens):
+    """The force part equals the force -> tool FRF applied to the force record.
+
+    Oracle: the frequency-domain loop model (sampled-data FRF, force held over
+    each sample) filtering ``result.force`` by FFT, independent of how
+    :func:`simulate` subtracts two time-domain runs. The record starts at rest, so
+    only its steady second half is compared against the periodic filter.
+    """
+    res = simulate(small_lens, parts=("tracking", "force"), bandwidth=1448,
+                   mass=0.175)
+    loop = ServoLoop(res.machine)
+    force = res.force
+    n = force.size
+    f = np.fft.rfftfreq(n, 1.0 / loop.fs)
+    h = np.zeros(f.size, dtype=complex)
+    s = 2j * np.pi * f[1:] / loop.fs
+    h[1:] = loop.frf(f[1:]).paths[("force", "tool")] * (1 - np.exp(-s)) / s
+    h[0] = loop.frf(np.array([1e-3])).paths[("force", "tool")][0].real
+    pred = np.fft.irfft(np.fft.rfft(force) * h, n)
+    dev = res.deviation["force"]
+    tail = slice(n // 2, n)
+    assert np.max(np.abs(dev[tail])) > 100e-9  # the paper's few hundred nm
+    np.testing.assert_allclose(dev[tail], pred[tail], rtol=0,
+                               atol=2e-3 * np.max(np.abs(dev[tail])))
+
+
 def test_seed_stability_and_dependence(small_lens):
     a = simulate(small_lens, parts=("vibration",), seed=3)
     b = simulate(small_lens, parts=("vibration",), seed=3)

@@ -24,6 +24,12 @@ from ._machine import (
     describe_machine,
     load_machine,
 )
+from ._perturb import (
+    NL_FIELDS,
+    LoopPerturbation,
+    Nonlinearity,
+    StructuralMode,
+)
 from ._plant import Plant, paper_eq_frf, plant_from_machine
 
 __all__ = [
@@ -54,4 +60,8 @@ __all__ = [
     "ServoLoop",
     "tune_pidf",
     "PATHS",
+    "LoopPerturbation",
+    "Nonlinearity",
+    "StructuralMode",
+    "NL_FIELDS",
 ]

@@ -12,7 +12,7 @@ import numpy as np
 import scipy as sp
 
 from ..errors import ConfigError
-from ._loop import ServoLoop
+from ._loop import loop_elements, plant_gain
 from ._machine import Machine
 
 __all__ = [
@@ -114,22 +114,8 @@ def open_loop_frf(
     ``G = ZOH * delay * G_I w_I^2/(s+w_I)^2 * B l * P(x_meas/Fa) * S w_s^2/(s+w_s)^2``;
     ``digital=False`` leaves out the ZOH and delay (an analogue sweep).
     """
-    loop = ServoLoop.__new__(ServoLoop)
-    loop.machine = machine
-    from ._plant import plant_from_machine
-
-    loop.plant = plant_from_machine(machine)
-    loop._dss_cache = None
-    ch = loop._chain(np.asarray(freq, float), discrete=digital)
-    pa = ch["plant"]["actuator_force"][:, loop._sensor_dof()]
-    return (
-        ch["delay"]
-        * ch["amp"]
-        * machine.actuator.force_constant
-        * pa
-        * ch["sens"]
-        * machine.sensor.sensitivity
-    )
+    ch = loop_elements(machine, np.asarray(freq, float), discrete=digital)
+    return plant_gain(ch, machine)
 
 
 def _split(key: str) -> tuple[str, str]:
