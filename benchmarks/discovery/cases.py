@@ -666,11 +666,8 @@ def steady_peak_current(case) -> float:
     if "ipeak" not in _CASE:
         t = np.arange(int(0.1 * case.fs)) / case.fs
         u = case.simulate_path(ModelParams(), t)["u"]
-        # the limit acts on the demand applied after the fractional loop delay,
-        # (1 - frac) u[k] + frac u[k - 1]: a one-sample spike of u is halved there
-        frac = case.discrete(ModelParams())[4]
-        ua = (1.0 - frac) * u[1:] + frac * u[:-1]
-        _CASE["ipeak"] = float(np.max(np.abs(ua)) * case.machine.actuator.current_gain)
+        # the limit acts on the DAC command itself (ServoLoop's amplifier stage)
+        _CASE["ipeak"] = float(np.max(np.abs(u)) * case.machine.actuator.current_gain)
     return _CASE["ipeak"]
 
 
