@@ -420,16 +420,6 @@ def _guids(surface: Surface, meta: str) -> dict[str, str]:
     }
 
 
-def _group(parent: Any, name: str) -> Any:
-    """Create a group without creation/modification times (reproducible bytes)."""
-    import h5py
-
-    gcpl = h5py.h5p.create(h5py.h5p.GROUP_CREATE)
-    gcpl.set_obj_track_times(False)
-    h5py.h5g.create(parent.id, name.encode(), gcpl=gcpl)
-    return parent[name]
-
-
 @register_writer(
     "datx",
     description="ZYGO Mx-style data (.datx, HDF5), heights in NanoMeters",
@@ -450,7 +440,9 @@ def encode_datx(surface: Surface) -> bytes:
 
     The bytes are reproducible: the ``{GUID}`` names are derived from the content
     (uuid5 of a SHA-256 of heights, pixel sizes, origin and metadata) instead of
-    being random, and no object carries creation or modification times.
+    being random, and no object carries creation or modification times (datasets
+    are created with ``track_times=False``; groups in the default, earliest
+    HDF5 file format store none).
 
     Parameters
     ----------
@@ -510,9 +502,9 @@ def encode_datx(surface: Surface) -> bytes:
     dyv = surface.dy or 0.0
     bio = BytesIO()
     with h5py.File(bio, "w") as f:
-        top = _group(f, "Attributes")
+        top = f.create_group("Attributes")
         top.attrs["File Layout Version"] = np.array([1], dtype=np.int32)
-        attrs = _group(top, guid["a"]).attrs
+        attrs = top.create_group(guid["a"]).attrs
         for key, text in (
             ("Objective", md.get("objective")),
             ("Comment", md.get("comment")),
@@ -533,8 +525,7 @@ def encode_datx(surface: Surface) -> bytes:
             attrs[key + ":Value"] = num(dxv)
             attrs[key + ":Unit"] = s("Meters")
         attrs[_META_KEY] = s(meta)
-        data = _group(f, "Data")
-        ds = _group(data, "Surface").create_dataset(
+        ds = f.create_group("Data/Surface").create_dataset(
             guid["s"], data=z, dtype=np.float64, track_times=False
         )
         ds.attrs["Unit"] = s("NanoMeters")
