@@ -450,3 +450,12 @@ def test_not_a_surface_and_all_invalid():
         areal_parameters(np.zeros((4, 4)))
     with pytest.raises(ConfigError, match="no valid pixels"):
         areal_parameters(Surface(np.full((4, 4), np.nan), 1e-6, 1e-6))
+
+
+def test_flat_and_uncalibrated_autocorrelation_refused():
+    with pytest.raises(ConfigError, match="flat"):
+        areal_autocorrelation(Surface(np.zeros((8, 8)), 1e-6, 1e-6))
+    with pytest.raises(ConfigError, match="calibrated"):
+        areal_autocorrelation(Surface(np.ones((8, 8)), None, None))
+    flat = areal_parameters(Surface(np.zeros((8, 8)), 1e-6, 1e-6))
+    assert flat["sq_m"] == 0 and math.isnan(flat["sal_m"]) and math.isnan(flat["ssk"])

@@ -163,9 +163,7 @@ def read_x3p(source: Source) -> Surface | Profile:
         return _read_tree(zf, root, name)
 
 
-def _read_tree(
-    zf: zipfile.ZipFile, root: ET.Element, name: str
-) -> Surface | Profile:
+def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface | Profile:
     r1 = _child(root, "Record1")
     r3 = _child(root, "Record3")
     if r1 is None or r3 is None:

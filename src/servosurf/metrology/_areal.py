@@ -80,15 +80,17 @@ def _prepare(surface: Surface, form: str, cutoff: float | None) -> np.ndarray:
 
 
 def _height(v: np.ndarray) -> dict[str, float]:
-    sq = float(np.sqrt(np.mean(v**2)))
+    """Height parameters of the valid heights ``v`` (m), measured from 0."""
+    v2 = v * v  # products, not v**3 / v**4 (numpy's pow is slow)
+    sq = float(np.sqrt(np.mean(v2)))
     return {
         "sa_m": float(np.mean(np.abs(v))),
         "sq_m": sq,
         "sp_m": float(v.max()),
-        "sv_m": float(-v.min()),
+        "sv_m": 0.0 - float(v.min()),  # never -0.0
         "sz_m": float(v.max() - v.min()),
-        "ssk": float(np.mean(v**3) / sq**3) if sq > 0 else math.nan,
-        "sku": float(np.mean(v**4) / sq**4) if sq > 0 else math.nan,
+        "ssk": float(np.mean(v2 * v) / sq**3) if sq > 0 else math.nan,
+        "sku": float(np.mean(v2 * v2) / sq**4) if sq > 0 else math.nan,
     }
 
 
@@ -142,7 +144,6 @@ def _acf(z: np.ndarray) -> np.ndarray:
     ly, lx = ny // 2, nx // 2
     valid = np.isfinite(z)
     r = np.where(valid, z, 0.0)
-    m = valid.astype(np.float64)
     shape = (sfft.next_fast_len(ny + ly, real=True), sfft.next_fast_len(nx + lx))
 
     def corr(a: np.ndarray) -> np.ndarray:
@@ -153,7 +154,12 @@ def _acf(z: np.ndarray) -> np.ndarray:
         return c[np.ix_(rows, cols)]
 
     num = corr(r)
-    count = np.rint(corr(m))
+    if valid.all():  # pairs at lag (ty, tx): (ny - |ty|) (nx - |tx|)
+        count = np.outer(
+            ny - np.abs(np.arange(-ly, ly + 1)), nx - np.abs(np.arange(-lx, lx + 1))
+        ).astype(np.float64)
+    else:
+        count = np.rint(corr(valid.astype(np.float64)))
     with np.errstate(invalid="ignore", divide="ignore"):
         acf = np.where(count >= 1, num / count, np.nan)
     return acf / acf[ly, lx]
@@ -189,7 +195,7 @@ def areal_autocorrelation(
     Raises
     ------
     ConfigError
-        Uncalibrated or all-invalid surface, bad ``form`` or ``cutoff``.
+        Uncalibrated, flat or all-invalid surface, bad ``form`` or ``cutoff``.
 
     Notes
     -----
@@ -203,6 +209,8 @@ def areal_autocorrelation(
             "areal_autocorrelation needs a calibrated Surface (pixel sizes in m)"
         )
     z = _prepare(surface, form, cutoff)
+    if not np.any(z[np.isfinite(z)]):
+        raise ConfigError("the surface is flat (Sq = 0): its autocorrelation is 0/0")
     acf = _acf(z)
     ly, lx = (acf.shape[0] - 1) // 2, (acf.shape[1] - 1) // 2
     assert surface.dx is not None and surface.dy is not None
