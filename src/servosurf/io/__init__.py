@@ -9,12 +9,16 @@ metropro_dat   .dat      ZYGO MetroPro binary, header formats 1, 2, 3
 zygo_ascii     .asc      ZYGO MetroPro ASCII ("Zygo ASCII Data File")
 zygo_xyz       .xyz      ZYGO XYZ (pixel x, y, height in um / No Data)
 datx           .datx     ZYGO Mx HDF5
-x3p            .x3p      ISO 5436-2 / ISO 25178-72
+x3p            .x3p      ISO 5436-2 / ISO 25178-72 (SUR map or PRF profile)
 npz            .npz      servosurf NumPy archive
 mx_profile_csv .csv      ZYGO Mx profile export (a :class:`Profile`)
 ============== ========= ===============================================
 
-Writers: ``datx``, ``metropro_dat``, ``x3p``, ``zygo_xyz``, ``npz``.
+Writers: ``datx``, ``metropro_dat``, ``x3p``, ``zygo_xyz``, ``npz``. A
+:class:`Profile` is written to ``.x3p`` as a profile (``FeatureType PRF``), to the
+other formats as a one-row map. Written files are reproducible (the same surface
+gives the same bytes: no time stamps, no random IDs) and name servosurf as their
+software, never a ZYGO instrument.
 
 All heights and pixel sizes are in metres; invalid pixels are NaN; row 0 is the top
 of the map as the instrument shows it.

@@ -20,6 +20,8 @@ _LAZY = {
     # roughness (ISO 4287, 4288, 25178-2)
     "profile_roughness": "._roughness", "areal_roughness": "._roughness",
     "iso4288_cutoff": "._roughness",
+    # ISO 25178-2 field parameters (height, hybrid, spatial, material ratio)
+    "areal_parameters": "._areal", "areal_autocorrelation": "._areal",
     # spectra
     "psd_1d": "._spectrum", "find_peaks_spectrum": "._spectrum",
     # lenslet form

@@ -350,7 +350,7 @@ def areal_roughness(
 
     See Also
     --------
-    gaussian_filter_2d, profile_roughness
+    gaussian_filter_2d, profile_roughness, areal_parameters
 
     Notes
     -----
@@ -374,15 +374,10 @@ def areal_roughness(
             raise ConfigError(
                 f"no valid pixels left after filtering with cutoff {cutoff:g} m"
             )
-    sq = float(np.sqrt(np.mean(r**2)))
+    from ._areal import _height  # the one implementation of the height family
+
     return {
-        "sa_m": float(np.mean(np.abs(r))),
-        "sq_m": sq,
-        "sp_m": float(r.max()),
-        "sv_m": float(-r.min()),
-        "sz_m": float(r.max() - r.min()),
-        "ssk": float(np.mean(r**3) / sq**3) if sq > 0 else float("nan"),
-        "sku": float(np.mean(r**4) / sq**4) if sq > 0 else float("nan"),
+        **_height(r),
         "cutoff_m": None if cutoff is None else float(cutoff),
         "n_valid": int(r.size),
     }
