@@ -51,6 +51,9 @@ FRF_FLOOR = 1e-3
 MAP_FLOOR = 0.05e-9
 #: Points closer than this to the uncut top are left out (cut edge), m.
 EDGE_MARGIN = 30e-9
+#: Cut points whose runner-up pass lies less than this many standard deviations
+#: of the two passes' tool-noise difference above the active pass are left out.
+AMBIGUITY_SIGMAS = 4.0
 #: At most this many uncut points of a map are used.
 MAX_UNCUT = 20000
 
@@ -648,8 +651,14 @@ class FRFBlock(Block):
         return float(np.exp(np.mean(np.log(np.abs(self.frf / h)))))
 
 
-def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
-    """Autocovariance (m^2) of the stochastic tool error at ``lags`` (s)."""
+def tool_autocov_table(ctx: Context, p: ModelParams) -> np.ndarray:
+    """Autocovariance (m^2) of the stochastic tool error at integer sample lags.
+
+    ``table[k]`` is the covariance at lag ``k / fs`` of the controller-rate tool
+    error, from the synthesised real-error PSD above ``fs / 4096`` (the one
+    :func:`servosurf.noise.realise` draws ``simulate``'s vibration from), on a
+    periodic grid of 2^17 samples (0.66 s at 199.6 kHz).
+    """
     fs = ctx.case.fs
 
     def table():
@@ -660,10 +669,19 @@ def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
         r = np.fft.irfft(s, n) * fs / 2.0
         return r[: n // 2]
 
-    r = ctx.memo((p.key(("linear", "sensor_noise")), "toolcov"), table)
-    k = np.abs(np.asarray(lags)) * fs
-    out = np.interp(k, np.arange(r.size), r, right=0.0)
-    return out
+    return ctx.memo((p.key(("linear", "sensor_noise")), "toolcov"), table)
+
+
+def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
+    """Autocovariance (m^2) of the stochastic tool error at ``lags`` (s)."""
+    r = tool_autocov_table(ctx, p)
+    k = np.abs(np.asarray(lags)) * ctx.case.fs
+    return np.interp(k, np.arange(r.size), r, right=0.0)
+
+
+#: Cut points whose pass times are further apart than this (s) are treated as
+#: independent noise segments (different revolutions or rings).
+SEGMENT_GAP = 0.02
 
 
 class PointsBlock(Block):
@@ -716,11 +734,16 @@ class PointsBlock(Block):
         traj = ctx.trajectory(p0)
         from ._surface import surface_heights
 
-        h0, k0, hmin = surface_heights(case, pts, p0, traj, return_pass=True)
+        h0, k0, hmin, gap = surface_heights(case, pts, p0, traj, return_pass=True)
         self.pts_all = pts
         cut = k0 >= 0
-        # leave out the cut edge (where the boundary moves with any effect)
-        keep = ~(np.abs(hmin) < EDGE_MARGIN)
+        # leave out the cut edge (where the boundary moves with any effect) and
+        # the points two passes compete for (cusps of a facing cut): there the
+        # tool noise decides which pass leaves the surface, a min of two noisy
+        # heights the Gaussian model cannot describe
+        rt = tool_autocov_table(ctx, p0)
+        ambiguous = gap < AMBIGUITY_SIGMAS * math.sqrt(2.0 * max(rt[0], 0.0))
+        keep = ~(np.abs(hmin) < EDGE_MARGIN) & ~(cut & ambiguous)
         # the uncut top only carries instrument noise, piston and tilt: thin it
         unc = np.nonzero(keep & ~cut)[0]
         if unc.size > MAX_UNCUT:
@@ -778,31 +801,74 @@ class PointsBlock(Block):
         else:
             d = np.hypot(np.diff(self.x_all), np.diff(self.y_all))
             self._pitch = float(np.median(d)) if d.size else 1e-6
-        # time bins of cut points: points cut within one pixel's travel share noise
-        v = self.ctx.case.toolpath.path.angular_speed * float(np.median(self.pts.r))
-        dt_bin = max(self._pitch / v, 1.0 / fs)
+        # The tool height at a cut point is the controller-rate tool error
+        # interpolated linearly between the two samples around its pass time (the
+        # sweep interpolates the sampled path): z_i = (1 - a_i) n_k + a_i n_(k+1).
+        # Points are grouped by their interval k; in each group the residual is
+        # split exactly into its projection on the columns (1 - a, a), which
+        # carries the tool noise (at most two statistics per interval, whose
+        # covariance follows from the tool error's autocovariance at integer
+        # lags), and the orthogonal rest, which carries only instrument noise.
+        cut = self.cut
         bins = np.full(n, -1, dtype=np.int64)
-        if self.cut.any():
-            key = np.floor(self.tpass[self.cut] / dt_bin).astype(np.int64)
-            _, inv = np.unique(key, return_inverse=True)
-            bins[self.cut] = inv
+        a = np.zeros(n)
+        ks = np.zeros(0, dtype=np.int64)
+        if cut.any():
+            x = self.tpass[cut] * fs
+            k = np.floor(x)
+            a[cut] = x - k
+            ks, inv = np.unique(k.astype(np.int64), return_inverse=True)
+            bins[cut] = inv
         self.bins = bins
-        nb = int(bins.max()) + 1 if self.cut.any() else 0
+        self.a = a
+        self.bin_sample = ks
+        nb = int(ks.size)
         self.nb = nb
-        counts = np.bincount(bins[bins >= 0], minlength=nb).astype(float)
+        bc = bins[cut]
+        ac = a[cut]
+        counts = np.bincount(bc, minlength=nb).astype(float)
         self.counts = counts
-        tb = np.zeros(nb)
+        self.tb = (
+            np.bincount(bc, weights=self.tpass[cut], minlength=nb)
+            / np.maximum(counts, 1)
+            if nb
+            else np.zeros(0)
+        )
+        s11 = np.bincount(bc, weights=(1 - ac) ** 2, minlength=nb)
+        s12 = np.bincount(bc, weights=(1 - ac) * ac, minlength=nb)
+        s22 = np.bincount(bc, weights=ac**2, minlength=nb)
+        l11 = np.sqrt(s11)
+        l21 = np.where(l11 > 0, s12 / np.maximum(l11, 1e-300), 0.0)
+        l22sq = s22 - l21**2
+        rank2 = (counts >= 2) & (l22sq > 1e-8 * np.maximum(s22, 1e-300))
+        l22 = np.where(rank2, np.sqrt(np.maximum(l22sq, 0.0)), 0.0)
+        self._gram = (s11, s12, s22, l11, l21, l22, rank2)
+        # statistics: one per interval (a projection on 1 - a), a second where
+        # the interval's points span two directions
+        self.stat_bin = np.concatenate([np.arange(nb), np.nonzero(rank2)[0]])
+        self.stat_comp = np.concatenate(
+            [np.zeros(nb, dtype=np.int64), np.ones(int(rank2.sum()), dtype=np.int64)]
+        )
+        n_stats = int(self.stat_bin.size)
+        self.n_within = int(cut.sum()) - n_stats
+        # leverage of each cut point in its interval (for the sigma estimate)
+        det = s11 * s22 - s12**2
+        lev = np.zeros(n)
         if nb:
-            tb = np.bincount(
-                bins[bins >= 0], weights=self.tpass[self.cut], minlength=nb
-            ) / np.maximum(counts, 1)
-        self.tb = tb
-        # instrument noise from the nominal residual: within-bin spread and uncut.
-        # A clipped standard deviation (points beyond 5 robust sigma left out), not
-        # the MAD: the omnibus RMS tests of _locate compare variances at ~1e4 dof,
-        # where the MAD's 37 % efficiency alone spread the along-cut statistic
-        # ~1.3x wider than chi2 (measured on null cases). The estimate's own
-        # uncertainty enters those tests through ``sigma_dof`` and the overlaps.
+            x1, x2 = 1 - ac, ac
+            r2 = rank2[bc]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                h2 = (x1**2 * s22[bc] - 2 * x1 * x2 * s12[bc] + x2**2 * s11[bc]) / (
+                    det[bc])
+                h1 = x1**2 / s11[bc]
+            lev[cut] = np.where(r2, h2, h1)
+        self._lev = lev
+        # instrument noise from the nominal residual: within-interval spread and
+        # uncut. A clipped standard deviation (points beyond 5 robust sigma left
+        # out), not the MAD: the omnibus RMS tests of _locate compare variances at
+        # ~1e4 dof, where the MAD's 37 % efficiency alone spread the along-cut
+        # statistic ~1.3x wider than chi2 (measured on null cases). The estimate's
+        # own uncertainty enters those tests through ``sigma_dof`` and overlaps.
         X = self._nuisance(p0)
         self.X_raw = X
         r0 = self.z - self._predict(p0)
@@ -811,19 +877,13 @@ class PointsBlock(Block):
         dev = []
         n_within = 0
         if nb:
-            mb = np.bincount(
-                bins[self.cut], weights=r0[self.cut], minlength=nb
-            ) / np.maximum(counts, 1)
-            multi = counts[bins[self.cut]] > 1
-            within = (r0[self.cut] - mb[bins[self.cut]])[multi]
-            scale = np.sqrt(
-                counts[bins[self.cut]] / np.maximum(counts[bins[self.cut]] - 1, 1)
-            )
-            dev.append(within * scale[multi])
-            n_within = int(np.sum(counts[counts > 1] - 1))
+            w0 = self._within(r0[:, None])[:, 0]
+            ok = lev[cut] < 1 - 1e-9
+            dev.append(w0[ok] / np.sqrt(1 - lev[cut][ok]))
+            n_within = self.n_within
         n_uncut = 0
-        if (~self.cut).sum() > 8:
-            u = r0[~self.cut]
+        if (~cut).sum() > 8:
+            u = r0[~cut]
             dev.append(u - np.median(u))
             n_uncut = u.size
         allv = np.concatenate(dev) if dev else np.zeros(0)
@@ -842,26 +902,43 @@ class PointsBlock(Block):
             dof_sig = math.inf  # the floor, not an estimate
         self.sigma = max(float(sig), MAP_FLOOR)
         #: dof of the instrument-variance estimate, and how many of them came
-        #: from the within-bin spread and from the uncut top
+        #: from the within-interval spread and from the uncut top
         self.sigma_dof = float(dof_sig)
         self.sigma_parts = {"within": n_within, "uncut": n_uncut}
-        # bin-mean covariance: tool vibration + instrument / count, per segment;
+        # covariance of the interval statistics: tool error through their sample
+        # weights plus the instrument's sigma^2, per segment of connected time;
         # whitening by the block-diagonal inverse Cholesky factor (sparse)
         self.segments = []
         self.wbins = None
         self.instrument_share = 0.0
         if nb:
-            order = np.argsort(tb)
-            gaps = np.nonzero(np.diff(tb[order]) > 0.5e-3)[0] + 1
-            for seg in np.split(order, gaps):
-                lags = tb[seg][:, None] - tb[seg][None, :]
-                c = tool_autocov(self.ctx, p0, lags)
-                c = c + np.diag(self.sigma**2 / counts[seg])
+            rt = tool_autocov_table(self.ctx, p0)
+            b_of = self.stat_bin
+            g0 = np.where(self.stat_comp == 0, l11[b_of], 0.0)
+            g1 = np.where(self.stat_comp == 0, l21[b_of], l22[b_of])
+            kk = ks[b_of]
+            order = np.argsort(kk, kind="stable")
+            gap = max(int(SEGMENT_GAP * fs), 1)
+            cuts = np.nonzero(np.diff(kk[order]) > gap)[0] + 1
+
+            def cov_at(d):
+                d = np.abs(d)
+                return np.where(d < rt.size, rt[np.minimum(d, rt.size - 1)], 0.0)
+
+            for seg in np.split(order, cuts):
+                d = kk[seg][:, None] - kk[seg][None, :]
+                c = (
+                    np.outer(g0[seg], g0[seg]) * cov_at(d)
+                    + np.outer(g0[seg], g1[seg]) * cov_at(d - 1)
+                    + np.outer(g1[seg], g0[seg]) * cov_at(d + 1)
+                    + np.outer(g1[seg], g1[seg]) * cov_at(d)
+                )
+                c[np.diag_indices_from(c)] += self.sigma**2
                 try:
                     ch = np.linalg.cholesky(c)
                 except np.linalg.LinAlgError:
                     ch = np.linalg.cholesky(
-                        c + np.eye(seg.size) * 1e-6 * np.trace(c) / seg.size
+                        c + np.eye(seg.size) * 1e-9 * np.trace(c) / seg.size
                     )
                 self.segments.append((seg, ch))
             inv = [
@@ -870,22 +947,59 @@ class PointsBlock(Block):
             ]
             self.seg_index = np.concatenate([seg for seg, _ in self.segments])
             self.wbins = sp.sparse.block_diag(inv, format="csr")
-            # share of the whitened bin-mean power that scales with the instrument
-            # variance: d(sum v^2)/d(log sigma^2) = -tr(C^-1 D) on average,
-            # D = sigma^2 / counts (what an error in sigma moves in that test)
-            cinv_diag = np.asarray(self.wbins.multiply(self.wbins).sum(axis=0))
+            # share of the whitened statistics' power that scales with the
+            # instrument variance: sigma^2 tr(C^-1) / m on average (what an
+            # error in sigma moves in the along-cut test)
             self.instrument_share = float(
-                np.sum(cinv_diag.ravel() * self.sigma**2 / counts[self.seg_index])
-                / nb
+                self.sigma**2 * self.wbins.multiply(self.wbins).sum() / n_stats
             )
         wx = self._whiten(X)
         q, _ = np.linalg.qr(wx)
         self.q = q
         self.dof = n - q.shape[1]
 
+    def _stats(self, rr: np.ndarray) -> np.ndarray:
+        """Interval statistics ``L^-1 X^T r`` of cut residuals (n_stats, m)."""
+        s11, s12, s22, l11, l21, l22, rank2 = self._gram
+        b = self.bins[self.cut]
+        ac = self.a[self.cut]
+        nb = self.nb
+        m = rr.shape[1]
+        t1 = np.zeros((nb, m))
+        t2 = np.zeros((nb, m))
+        for j in range(m):
+            rc = rr[self.cut, j]
+            t1[:, j] = np.bincount(b, weights=(1 - ac) * rc, minlength=nb)
+            t2[:, j] = np.bincount(b, weights=ac * rc, minlength=nb)
+        beta1 = t1 / l11[:, None]
+        beta2 = (t2[rank2] - l21[rank2, None] * beta1[rank2]) / l22[rank2, None]
+        return np.concatenate([beta1, beta2], axis=0)
+
+    def _within(self, rr: np.ndarray) -> np.ndarray:
+        """Cut residuals minus their projection on each interval's (1 - a, a)."""
+        s11, s12, s22, l11, l21, l22, rank2 = self._gram
+        b = self.bins[self.cut]
+        ac = self.a[self.cut]
+        nb = self.nb
+        out = np.empty((b.size, rr.shape[1]))
+        det = s11 * s22 - s12**2
+        for j in range(rr.shape[1]):
+            rc = rr[self.cut, j]
+            t1 = np.bincount(b, weights=(1 - ac) * rc, minlength=nb)
+            t2 = np.bincount(b, weights=ac * rc, minlength=nb)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                th1 = np.where(rank2, (s22 * t1 - s12 * t2) / det, t1 / s11)
+                th2 = np.where(rank2, (s11 * t2 - s12 * t1) / det, 0.0)
+            out[:, j] = rc - ((1 - ac) * th1[b] + ac * th2[b])
+        return out
+
     # ------------------------------------------------------------ evaluation
     def _whiten(self, r: np.ndarray) -> np.ndarray:
-        """Whiten point residuals (n,) or columns (n, m)."""
+        """Whiten point residuals (n,) or columns (n, m).
+
+        Layout: the uncut points, then the cut points' within-interval parts
+        (instrument noise only), then the whitened interval statistics.
+        """
         two = r.ndim == 2
         rr = r if two else r[:, None]
         parts = []
@@ -893,15 +1007,9 @@ class PointsBlock(Block):
         if (~cut).any():
             parts.append(rr[~cut] / self.sigma)
         if self.nb:
-            b = self.bins[cut]
-            cnt = self.counts
-            mb = np.zeros((self.nb, rr.shape[1]))
-            for j in range(rr.shape[1]):
-                mb[:, j] = np.bincount(b, weights=rr[cut, j], minlength=self.nb)
-            mb /= np.maximum(cnt, 1)[:, None]
-            within = (rr[cut] - mb[b]) / self.sigma
-            parts.append(within)
-            parts.append(np.asarray(self.wbins @ mb[self.seg_index]))
+            parts.append(self._within(rr) / self.sigma)
+            st = self._stats(rr)
+            parts.append(np.asarray(self.wbins @ st[self.seg_index]))
         out = np.concatenate(parts, axis=0)
         return out if two else out[:, 0]
 
