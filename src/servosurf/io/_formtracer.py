@@ -72,10 +72,10 @@ def _is_formtracer(data: bytes) -> bool:
     head = data[:512]
     if b"\x00" in head:
         return False
-    lines = head.decode("latin-1").lstrip("\ufeff").splitlines()
-    if len(lines) < 2 or not _UNIT_LINE.match(lines[0].strip()):
+    lines = head.decode("utf-8", errors="ignore").lstrip("\ufeff").splitlines()
+    if not lines or not _UNIT_LINE.match(lines[0].strip()):
         return False
-    if _COUNT_LINE.match(lines[1].strip()):
+    if len(lines) == 1 or _COUNT_LINE.match(lines[1].strip()):  # 1 line: truncated
         return True
     return len(lines) > 2 and bool(_ROW.match(lines[2]))
 
@@ -216,7 +216,7 @@ def read_formtracer(source: Source) -> Profile:
     z = zs * factor
     if not np.isfinite(x).all():
         k = int(np.flatnonzero(~np.isfinite(x))[0])
-        raise corrupt(name, f"line {k + 3} x is {xs[k]!r}", "a finite position")
+        raise corrupt(name, f"line {k + 3} x is {float(xs[k])!r}", "a finite position")
     d = np.diff(x)
     reversed_ = bool(d[0] < 0)
     bad = np.flatnonzero(d >= 0) if reversed_ else np.flatnonzero(d <= 0)
@@ -224,8 +224,8 @@ def read_formtracer(source: Source) -> Profile:
         k = int(bad[0]) + 1
         raise corrupt(
             name,
-            f"x is not strictly monotonic at line {k + 3} ({xs[k - 1]!r} then "
-            f"{xs[k]!r})",
+            f"x is not strictly monotonic at line {k + 3} ({float(xs[k - 1])!r} "
+            f"then {float(xs[k])!r})",
             "strictly increasing or strictly decreasing x",
         )
     if reversed_:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+import scipy.ndimage as ndi
 import scipy.signal
 
 from .._validation import check_finite, check_positive
@@ -205,21 +206,30 @@ def profile_through(
 
 
 def resample_profile(
-    profile: Profile, dx: float, *, x0: float | None = None, n: int | None = None
+    profile: Profile,
+    dx: float,
+    *,
+    x0: float | None = None,
+    n: int | None = None,
+    order: int = 3,
 ) -> Profile:
-    """Resample a profile onto a uniform grid by linear interpolation.
+    """Resample a profile onto a uniform grid (cubic B-spline or linear).
 
     Parameters
     ----------
     profile : Profile
         Heights in m; NaN samples stay invalid (a new sample is NaN when either
-        neighbour it interpolates between is NaN).
+        source sample it falls between is NaN).
     dx : float
         New step, in m.
     x0 : float, optional
         First position of the new grid, in m; default the profile's ``x0``.
     n : int, optional
         Number of new samples; default as many as fit in the profile's extent.
+    order : {1, 3}, default: 3
+        Interpolation: 3 for a cubic B-spline interpolant
+        (:func:`scipy.ndimage.map_coordinates`, which keeps short wavelengths
+        that linear interpolation damps), 1 for linear interpolation.
 
     Returns
     -------
@@ -228,34 +238,48 @@ def resample_profile(
 
     Notes
     -----
-    Linear interpolation does not low-pass the profile: when the new step is
-    coarser than the old one, wavelengths shorter than twice the new step alias.
-    The measured profiles compare at their own step, so the simulated one is
-    resampled and its pitch should not be coarser than the measured step.
+    Interpolation does not low-pass the profile: when the new step is coarser than
+    the old one, wavelengths shorter than twice the new step alias. The measured
+    profiles compare at their own step, so the simulated one is resampled and its
+    pitch should not be coarser than the measured step. Before the cubic spline
+    is built, NaN samples are bridged linearly; the result is NaN wherever a
+    linear interpolation would touch a NaN sample.
     """
     _check_profile(profile, "profile")
     dx = check_positive(dx, name="dx")
+    if order not in (1, 3):
+        raise ConfigError(f"order must be 1 (linear) or 3 (cubic), got {order!r}")
     start = profile.x0 if x0 is None else check_finite(x0, name="x0")
     if n is None:
         end = profile.x0 + (profile.z.size - 1) * profile.dx
         n = int(math.floor((end - start) / dx + 1e-9)) + 1
     if n < 2:
         raise ConfigError(f"resampled profile would have {n} sample(s); expected >= 2")
+    z = profile.z
     xq = start + dx * np.arange(n)
     u = (xq - profile.x0) / profile.dx
     out = np.full(n, np.nan)
-    inside = (u >= -1e-9) & (u <= profile.z.size - 1 + 1e-9)
-    ui = np.clip(u[inside], 0.0, profile.z.size - 1)
-    k = np.minimum(np.floor(ui).astype(np.int64), profile.z.size - 2)
+    inside = (u >= -1e-9) & (u <= z.size - 1 + 1e-9)
+    ui = np.clip(u[inside], 0.0, z.size - 1)
+    k = np.minimum(np.floor(ui).astype(np.int64), z.size - 2)
     f = ui - k
-    z = profile.z
-    out[inside] = (1.0 - f) * z[k] + f * z[k + 1]
-    # an exact hit on a valid sample next to a NaN stays valid
-    exact = np.isclose(f, 0.0, atol=1e-9)
-    vals = out[inside]
-    vals[exact] = z[k[exact]]
-    exact1 = np.isclose(f, 1.0, atol=1e-9)
-    vals[exact1] = z[k[exact1] + 1]
+    on0 = np.isclose(f, 0.0, atol=1e-9)  # on sample k: only it matters
+    on1 = np.isclose(f, 1.0, atol=1e-9)  # on sample k + 1
+    valid = np.where(on0, np.isfinite(z[k]), np.where(
+        on1, np.isfinite(z[k + 1]), np.isfinite(z[k]) & np.isfinite(z[k + 1])))
+    ok = np.isfinite(z)
+    if ok.sum() >= 2:
+        idx = np.arange(z.size)
+        filled = np.where(ok, z, np.interp(idx, idx[ok], z[ok]))
+    else:
+        filled = np.where(ok, z, 0.0)
+    if order == 1:
+        vals = (1.0 - f) * filled[k] + f * filled[k + 1]
+    else:
+        vals = ndi.map_coordinates(filled, [ui], order=3, mode="mirror",
+                                   prefilter=True)
+    vals = np.where(on0, filled[k], np.where(on1, filled[k + 1], vals))
+    vals[~valid] = np.nan
     out[inside] = vals
     return Profile(out, dx, metadata=dict(profile.metadata), x0=start)
 
@@ -272,7 +296,7 @@ class ProfileRegistration:
         True when the moving profile was mirrored (``sign = -1``).
     correlation : float
         Normalised cross-correlation (Pearson coefficient over the overlap) at the
-        chosen shift (-1 .. 1).
+        chosen shift (-1 .. 1), interpolated at the fractional lag like the shift.
     overlap : float
         Length of the overlap at that shift, in m.
     correlation_other : float or None
@@ -342,13 +366,14 @@ def _best_lag(ncc: np.ndarray, lags: np.ndarray, allowed: np.ndarray) -> tuple[f
     j = int(np.argmax(vals))
     if not np.isfinite(vals[j]):
         return math.nan, math.nan, -1
-    frac = 0.0
+    frac, peak = 0.0, float(vals[j])
     if 0 < j < vals.size - 1 and np.isfinite(vals[j - 1]) and np.isfinite(vals[j + 1]):
         a, b, c = vals[j - 1], vals[j], vals[j + 1]
         den = a - 2.0 * b + c
-        if den < 0:
+        if den < 0:  # the parabola's vertex: fractional lag and its value
             frac = float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
-    return float(lags[j] + frac), float(vals[j]), j
+            peak = float(min(b - 0.125 * (a - c) ** 2 / den, 1.0))
+    return float(lags[j] + frac), peak, j
 
 
 def register_profiles(
@@ -367,7 +392,7 @@ def register_profiles(
         Profile that stays in place (heights in m, NaN invalid).
     moving : Profile
         Profile to align onto ``reference``; it is resampled to the reference's
-        step (linear interpolation) before the search.
+        step (cubic B-spline) before the search.
     mirror : bool or "auto", default: "auto"
         ``False``: translation only; ``True``: mirror the moving profile
         (``x -> -x``) first; ``"auto"``: try both and keep the orientation with the

@@ -18,8 +18,8 @@ What :func:`compare_profiles` does, in order (SI units, m):
    deviations and registered with
    :func:`~servosurf.metrology.register_profiles`: a shift
    along the profile and, with ``mirror="auto"``, a mirror ``x -> -x`` when it
-   correlates better. The simulated profile is then interpolated (linearly) onto
-   the measured samples: ``x_measured = sign * x_simulated + shift``.
+   correlates better. The simulated profile is then interpolated (cubic B-spline)
+   onto the measured samples: ``x_measured = sign * x_simulated + shift``.
 5. **Same mask, same form, same filter, same trimming.** Samples invalid on
    either side are invalid on both and the common valid span is kept; the same
    least-squares polynomial form (default quadratic: a part's sag) is removed from
