@@ -75,7 +75,13 @@ def _is_formtracer(data: bytes) -> bool:
     lines = head.decode("utf-8", errors="ignore").lstrip("\ufeff").splitlines()
     if not lines or not _UNIT_LINE.match(lines[0].strip()):
         return False
-    if len(lines) == 1 or _COUNT_LINE.match(lines[1].strip()):  # 1 line: truncated
+    if len(lines) == 1:  # truncated after the unit: only a known unit counts
+        try:
+            length_factor(lines[0].strip())
+        except UnitError:
+            return False
+        return True
+    if _COUNT_LINE.match(lines[1].strip()):
         return True
     return len(lines) > 2 and bool(_ROW.match(lines[2]))
 

@@ -19,8 +19,9 @@ Processing (all lengths in m, angles in rad)
 --------------------------------------------
 1. **Nose location.** The trace's apex is the median of the 1 % of points
    farthest from the line through its two ends (the two points farthest apart);
-   a first circle is fitted (algebraic, Kasa) to the 2 % of points (at least 20)
-   nearest to it.
+   a first circle is fitted (algebraic, Kasa, refitted without points beyond 3
+   robust standard deviations) to the points within 15 % of the chord from it
+   (at least 20).
 2. **Tool axis and nose arc from the flanks.** On each side of the nose, the
    trace between 1.2 and 4 radii from the centre is fitted with a straight line
    (principal axis, refitted 8 times without the points beyond 3 robust standard
@@ -38,8 +39,9 @@ Processing (all lengths in m, angles in rad)
 4. **Spikes and circle fit, iterated until the kept points settle.** Every point
    gets its radial residual ``e = |p - c| - R`` and its contact angle phi. Points
    with ``|e| > GROSS_FRACTION R`` are gross outliers (stray probe readings).
-   Inside the arc, a point whose residual differs from the running median of its
-   neighbours (``spike_window`` wide in angle, default 8 degrees) by more than
+   Inside the arc, a point whose residual differs from the median of its
+   ``spike_neighbours`` neighbours on each side in angle (default 3: a Hampel
+   filter without the point itself) by more than
    ``spike_threshold`` (default 4) robust standard deviations (1.4826 x the median
    absolute deviation of those differences) is a spike. The circle is refitted to
    the kept points by geometric least squares (Gauss-Newton on the orthogonal
@@ -97,6 +99,10 @@ GROSS_FRACTION: float = 0.1
 #: Flank fits use the trace between these multiples of the radius from the centre.
 FLANK_RANGE: tuple[float, float] = (1.2, 4.0)
 
+#: The first circle is fitted to the points within this fraction of the trace's
+#: chord (the distance between its two ends) from the apex.
+INITIAL_REACH: float = 0.15
+
 #: Fewest points for a flank line.
 _MIN_FLANK_POINTS: int = 10
 
@@ -124,8 +130,9 @@ class EdgeSettings:
         Angle left out at each flank tangent point, in rad.
     spike_threshold : float, default: 4.0
         Spike rejection threshold in robust standard deviations.
-    spike_window : float, default: radians(8)
-        Width of the running-median window of the spike test, in rad.
+    spike_neighbours : int, default: 3
+        Neighbours on each side (in angle) in the running median of the spike
+        test (a Hampel filter of ``2 k + 1`` points).
     smoothing : float, default: 25e-6
         Cut-off wavelength of the Gaussian smoothing along the arc, in m.
     angle_step : float, default: radians(0.25)
@@ -140,15 +147,14 @@ class EdgeSettings:
     half_angle: float = math.radians(45.0)
     flank_margin: float = math.radians(5.0)
     spike_threshold: float = 4.0
-    spike_window: float = math.radians(8.0)
+    spike_neighbours: int = 3
     smoothing: float = 25e-6
     angle_step: float = math.radians(0.25)
     mirror: bool = False
     axis_angle: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("half_angle", "spike_threshold", "spike_window", "smoothing",
-                     "angle_step"):
+        for name in ("half_angle", "spike_threshold", "smoothing", "angle_step"):
             check_positive(getattr(self, name), name=f"edge {name.replace('_', '-')}")
         check_nonnegative(self.flank_margin, name="edge flank-margin")
         if self.half_angle > math.pi / 2:
@@ -161,7 +167,12 @@ class EdgeSettings:
                 f"edge smoothing must be a cut-off wavelength in m below 1e-3, got "
                 f"{self.smoothing!r} (um given as m?)"
             )
-        for name in ("flank_margin", "spike_window", "angle_step"):
+        k = self.spike_neighbours
+        if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= 50:
+            raise ConfigError(
+                f"edge spike-neighbours must be an integer in [1, 50], got {k!r}"
+            )
+        for name in ("flank_margin", "angle_step"):
             if getattr(self, name) > math.radians(30.0):
                 raise ConfigError(
                     f"edge {name.replace('_', '-')} must be an angle in rad below "
@@ -322,7 +333,7 @@ class ToolEdge:
                 "half_angle_rad": self.settings.half_angle,
                 "flank_margin_rad": self.settings.flank_margin,
                 "spike_threshold_sigma": self.settings.spike_threshold,
-                "spike_window_rad": self.settings.spike_window,
+                "spike_neighbours": self.settings.spike_neighbours,
                 "smoothing_cutoff_m": self.settings.smoothing,
                 "angle_step_rad": self.settings.angle_step,
             },
@@ -520,6 +531,23 @@ def _kasa(u: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
     return float(cu + mu), float(cv + mv), float(math.sqrt(max(r2, 0.0)))
 
 
+def _robust_kasa(u: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
+    """Kasa fit refitted 6 times without points beyond 3 robust standard deviations
+    (stray readings inside the V must not pull the first circle)."""
+    keep = np.ones(u.size, dtype=bool)
+    cu, cv, r = _kasa(u, v)
+    for _ in range(6):
+        res = np.hypot(u - cu, v - cv) - r
+        dev = np.abs(res - np.median(res[keep]))
+        sigma = 1.4826 * float(np.median(dev[keep]))
+        new = dev <= 3.0 * sigma
+        if new.sum() < 10 or not sigma > 0 or np.array_equal(new, keep):
+            break
+        keep = new
+        cu, cv, r = _kasa(u[keep], v[keep])
+    return cu, cv, r
+
+
 def _geometric(u: np.ndarray, v: np.ndarray, cu: float, cv: float,
                r: float) -> tuple[float, float, float]:
     """Orthogonal-distance circle fit by Gauss-Newton, from (cu, cv, r)."""
@@ -558,13 +586,20 @@ def _angles(u, v, cu, cv, axis, mirror) -> np.ndarray:
     return np.arctan2(du * ou + dv * ov, du * au + dv * av)
 
 
-def _running_median(phi: np.ndarray, e: np.ndarray, width: float) -> np.ndarray:
-    """Median of ``e`` over the points within ``width / 2`` in angle of each point."""
-    order = np.argsort(phi)
-    ps, es = phi[order], e[order]
-    lo = np.searchsorted(ps, ps - 0.5 * width, side="left")
-    hi = np.searchsorted(ps, ps + 0.5 * width, side="right")
-    med = np.array([np.median(es[a:b]) for a, b in zip(lo, hi, strict=True)])
+def _running_median(phi: np.ndarray, e: np.ndarray, k: int) -> np.ndarray:
+    """Median of ``e`` over the ``k`` neighbours on each side in phi of each point.
+
+    The point itself is left out, so that a spike does not pull its own reference
+    and the differences keep the noise's distribution.
+    """
+    order = np.argsort(phi, kind="stable")
+    es = e[order]
+    n = es.size
+    med = np.array([
+        np.median(np.concatenate([es[max(0, i - k): i], es[i + 1: i + k + 1]]))
+        if n > 1 else es[i]
+        for i in range(n)
+    ])
     out = np.empty_like(med)
     out[order] = med
     return out
@@ -606,8 +641,8 @@ def _flank(u: np.ndarray, v: np.ndarray, cu: float, cv: float, r: float,
     return mu, t
 
 
-def _apex(u: np.ndarray, v: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """Robust apex of a V-shaped trace and the unit normal pointing to it.
+def _apex(u: np.ndarray, v: np.ndarray) -> tuple[float, float, float]:
+    """Robust apex of a V-shaped trace and the length of its chord (m).
 
     The chord joins the two points farthest apart (the flank ends: a diameter of
     the convex hull); the apex is the median of the 1 % of points (at least 5)
@@ -633,7 +668,7 @@ def _apex(u: np.ndarray, v: np.ndarray) -> tuple[float, float, np.ndarray]:
     k = max(5, u.size // 100)
     top = np.argsort(dist)[-k:]
     apex = np.median(pts[top], axis=0)
-    return float(apex[0]), float(apex[1]), n
+    return float(apex[0]), float(apex[1]), float(np.hypot(*d))
 
 
 def _smooth(phi: np.ndarray, e: np.ndarray, grid: np.ndarray, radius: float,
@@ -696,9 +731,12 @@ def fit_tool_edge(
     c0, c1 = _plane(pts, columns, name)
     md["plane_columns"] = [c0, c1]
     u, v = pts[:, c0].copy(), pts[:, c1].copy()
-    au, av, _ = _apex(u, v)
-    near = np.argsort(np.hypot(u - au, v - av))[: max(20, u.size // 50)]
-    cu, cv, r = _kasa(u[near], v[near])
+    au, av, chord = _apex(u, v)
+    dist = np.hypot(u - au, v - av)
+    near = dist <= INITIAL_REACH * chord
+    if near.sum() < 20:
+        near = np.argsort(dist)[:20]
+    cu, cv, r = _robust_kasa(u[near], v[near])
     if not (math.isfinite(r) and r > 0):
         raise ConfigError(f"{name}: no circular nose found near the trace's apex")
     apex_axis = math.atan2(av - cv, au - cu)
@@ -740,7 +778,7 @@ def fit_tool_edge(
             if cand.sum() < _MIN_ARC_POINTS:
                 break
             trend = np.zeros(u.size)
-            trend[cand] = _running_median(phi[cand], e[cand], s.spike_window)
+            trend[cand] = _running_median(phi[cand], e[cand], s.spike_neighbours)
             d = e - trend
             sigma = 1.4826 * float(np.median(np.abs(d[cand] - np.median(d[cand]))))
             spike = in_arc & (gross | (np.abs(d) > s.spike_threshold * sigma))
@@ -809,7 +847,7 @@ def read_tool_edge(
     *,
     unit: str = "mm",
     columns: tuple[int, int] | None = None,
-    mirror: bool = False,
+    mirror: bool | None = None,
     settings: EdgeSettings | None = None,
 ) -> ToolEdge:
     """Read a tool-edge trace and fit it (see the module docstring).
@@ -822,9 +860,9 @@ def read_tool_edge(
         Length unit of the file's coordinates.
     columns : (int, int), optional
         The two in-plane columns of a 3-column trace.
-    mirror : bool, default: False
+    mirror : bool, optional
         Take the side of smaller u as outward (the trace was taken the other way
-        round); overrides ``settings.mirror``.
+        round); when given, overrides ``settings.mirror`` (default False).
     settings : EdgeSettings, optional
         Processing parameters.
 
@@ -853,7 +891,7 @@ def read_tool_edge(
     """
     pts, md = read_edge_trace(source, unit=unit)
     s = settings if settings is not None else EdgeSettings()
-    if mirror != s.mirror:
+    if mirror is not None and bool(mirror) != s.mirror:
         from dataclasses import replace
 
         s = replace(s, mirror=bool(mirror))
