@@ -352,3 +352,27 @@ def test_cli_simulate_with_measured_edge(synthetic, tmp_path, capsys):
     assert ra_round == pytest.approx(4 * h / (9 * math.sqrt(3)), rel=0.01)
     # with the deviation the 0.2 um waviness (60 um long waves) reshapes them
     assert abs(out["ra_m"] / ra_round - 1) > 0.03
+
+
+def test_cli_tool_edge_writes_a_reusable_waviness_csv(synthetic, tmp_path, capsys):
+    import json
+
+    edge, pts, _, _ = synthetic
+    (tmp_path / "edge.csv").write_bytes(_csv(pts, z=-0.8435))
+    rc = main(["tool-edge", str(tmp_path / "edge.csv"), "--half-angle-deg", "30",
+               "--out", str(tmp_path / "o"), "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(out["arc_rad"], [-math.radians(30), math.radians(30)])
+    assert abs(out["nose_radius_m"] - R0) < POS_TOL
+    # the CSV is the existing edge-waviness format: read back by the toolpath reader
+    ang, dev = tp.read_waviness_csv(tmp_path / "o" / "edge_waviness.csv")
+    narrow = tp.read_tool_edge(tmp_path / "edge.csv",
+                               settings=tp.EdgeSettings(half_angle=math.radians(30)))
+    np.testing.assert_allclose(ang, narrow.waviness_angle, atol=1e-7)  # 6 digits
+    np.testing.assert_allclose(dev, narrow.waviness_deviation, rtol=1e-5,
+                               atol=1e-15)
+    assert (tmp_path / "o" / "tool_edge.png").stat().st_size > 0
+    assert main(["tool-edge", str(tmp_path / "edge.csv"), "--out",
+                 str(tmp_path / "p")]) == 0
+    assert "nose radius" in capsys.readouterr().out
