@@ -33,6 +33,7 @@ COMMANDS = (
     "convert",
     "profile",
     "compare",
+    "tool_edge",
     "diagnose",
 )
 

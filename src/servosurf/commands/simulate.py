@@ -86,6 +86,19 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "write realisations.json (per-seed metrics in SI and their statistics) and "
         "realisations.png instead of one map (default 1)",
     )
+    p.add_argument(
+        "--tool",
+        metavar="EDGE",
+        help="measured tool-edge trace (laser-probe CSV, or x,[y,]z rows in mm): "
+        "its fitted nose radius (m), usable arc and edge deviation replace the "
+        "toolpath's tool; writes tool_edge.png",
+    )
+    p.add_argument(
+        "--edge-compensated",
+        action="store_true",
+        help="with --tool: the path already compensates this measured edge, so "
+        "only its fitted radius enters the sweep (not its deviation)",
+    )
     add_scheduler_args(p, "the realisations (one task per seed)")
     p.add_argument("--json", action="store_true", help="print summary.json on stdout")
     return p
@@ -136,6 +149,7 @@ def run(args) -> int:
         "parts": tuple(args.parts),
         "instrument": None if args.instrument == "none" else args.instrument,
     }
+    edge = _measured_edge(args, settings)
     if args.realisations > 1:
         return _run_realisations(args, tp, out, settings)
     res = simulate(tp, seed=args.seed, **settings)
@@ -181,6 +195,12 @@ def run(args) -> int:
             from ..viz._mesh import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
+        if edge is not None:
+            files["tool_edge_png"] = str(edge.plot(out / "tool_edge.png"))
+            summary["tool_edge"] = {
+                **edge.summary(),
+                "compensated": bool(args.edge_compensated),
+            }
     summary.update(
         settings=res.settings,
         files=files,
@@ -196,6 +216,21 @@ def run(args) -> int:
     if args.json:
         print_json(summary)
     return 0
+
+
+def _measured_edge(args, settings):
+    """``--tool EDGE``: fit the trace and add the hook that swaps the tool in."""
+    from ..errors import ConfigError
+
+    if not args.tool:
+        if args.edge_compensated:
+            raise ConfigError("--edge-compensated needs --tool EDGE (a measured edge)")
+        return None
+    from ..toolpath import MeasuredEdge, read_tool_edge
+
+    edge = read_tool_edge(args.tool)
+    settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
+    return edge
 
 
 def _run_realisations(args, tp, out, settings) -> int:

@@ -31,6 +31,10 @@ _LAZY = {
     # registration and resampling
     "register_translation": "._register", "shift_surface": "._register",
     "resample": "._register", "remove_form": "._register",
+    # profiles: crop, line through a map, 1-D registration
+    "crop_profile": "._profile", "trim_invalid_ends": "._profile",
+    "profile_through": "._profile", "resample_profile": "._profile",
+    "register_profiles": "._profile", "ProfileRegistration": "._profile",
     # interferometer model
     "Interferometer": "._interferometer", "INSTRUMENTS": "._interferometer",
     "load_instrument": "._interferometer", "measure": "._interferometer",

@@ -5,12 +5,24 @@ or only the windows that cut a field) -> deviations added to ``path.z`` by the s
 force and vibration stages -> :func:`sweep` (lower envelope of the tool arc) ->
 :class:`~servosurf.metrology.Surface`.
 
+A measured tool edge (:func:`read_tool_edge`) gives the :class:`Tool` its nose
+radius and edge deviation.
+
 Units are SI: m, s, rad, Hz; spindle speed in rev/s. TOML files may use the boundary
 aliases ``spindle-speed-rpm`` and ``<angle>-deg``.
 """
 
 from __future__ import annotations
 
+from ._edge import (
+    EdgeSettings,
+    MeasuredEdge,
+    ToolEdge,
+    fit_tool_edge,
+    read_edge_trace,
+    read_tool_edge,
+    tool_table_from_trace,
+)
 from ._paths import (
     FacingToolpath,
     LensletToolpath,
@@ -37,6 +49,13 @@ __all__ = [
     "load_toolpath",
     "toolpath_from_mapping",
     "read_waviness_csv",
+    "ToolEdge",
+    "EdgeSettings",
+    "MeasuredEdge",
+    "read_edge_trace",
+    "read_tool_edge",
+    "fit_tool_edge",
+    "tool_table_from_trace",
     "sample",
     "count_samples",
     "field_reach",

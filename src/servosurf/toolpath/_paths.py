@@ -23,6 +23,7 @@ import numpy as np
 
 from ..config import from_mapping, load_toml, param
 from ..errors import ConfigError
+from ._edge import tool_table_from_trace
 from ._tool import Field, Tool, read_waviness_csv
 
 __all__ = [
@@ -480,7 +481,10 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
         The TOML document (kebab-case keys). Boundary aliases: ``spindle-speed-rpm``
         (rpm) for ``facing.spindle-speed`` (rev/s); ``<angle>-deg`` (degree) for the
         tool's ``rake-angle``, ``clearance-angle`` and ``arc-half-angle`` (rad);
-        ``tool.edge-waviness`` names a CSV file (see :func:`read_waviness_csv`).
+        ``tool.edge-waviness`` names a CSV file (see :func:`read_waviness_csv`);
+        ``tool.edge-trace`` names a measured edge trace that gives the nose radius,
+        arc and waviness (see :func:`~servosurf.toolpath.tool_table_from_trace`
+        for its ``edge-*`` keys, e.g. ``edge-compensated = true``).
     base_dir : str or Path, optional
         Directory against which a relative ``edge-waviness`` path is resolved.
 
@@ -510,7 +514,8 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
     path_tab = dict(data.get(kind, {}))
     if kind == "facing":
         _pop_alias(path_tab, "spindle-speed", "spindle-speed-rpm", 1.0 / 60.0, kind)
-    tool_tab = dict(data.get("tool", {}))
+    tool_tab, _ = tool_table_from_trace(dict(data.get("tool", {})),
+                                        base_dir=base_dir)
     for key in _DEG_KEYS:
         _pop_alias(tool_tab, key, key + "-deg", math.pi / 180.0, "tool")
     if "waviness-angle-deg" in tool_tab:
