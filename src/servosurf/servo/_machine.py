@@ -26,6 +26,7 @@ from typing import Literal
 
 from ..config import describe, from_mapping, load_toml, param, to_mapping
 from ..errors import ConfigError
+from ._axis import AxisModel
 
 __all__ = [
     "Mechanics",
@@ -362,6 +363,8 @@ class Machine:
     alternative_disturbances: tuple[Disturbances, ...] = param(
         default_factory=tuple, doc="other named calibrations of the disturbances"
     )
+    # tool Z axis: the FTS loop above (default), a second-order axis or none
+    axis: AxisModel = param(default_factory=AxisModel)
     path: str = param("", doc="file this machine was read from (set by the loader)")
 
     def with_moving_mass(self, mass: float) -> Machine:
