@@ -277,7 +277,9 @@ def simulate(
             )
 
     t0, t1 = _span(spec, tool)
-    k0 = max(int(np.floor((t0 - SETTLE_TIME) * fs)), 0)
+    k0 = int(np.floor((t0 - SETTLE_TIME) * fs))
+    if spec.kind != "nc":  # an NC path holds its first point before t = 0
+        k0 = max(k0, 0)
     k1 = int(np.ceil(t1 * fs)) + 2
     n = k1 - k0
     if n > MAX_SPAN_SAMPLES:

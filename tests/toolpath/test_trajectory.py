@@ -397,3 +397,21 @@ def test_band_field():
     assert x[-1] <= 1.031171e-3 < x[-1] + fld.pitch_x
     with pytest.raises(ConfigError, match=r"band pitch must be in \(0, 1e-6\] m"):
         tp.band_field(1e-3, pitch=2e-6)
+
+
+def test_real_1022_revolutions_and_feed(tmp_path):
+    from tests.conftest import SHARED
+
+    prog = SHARED / "data" / "upm_sts" / "1022" / "1022-spiralPath20230418T214917.nc"
+    if not prog.is_file():
+        pytest.skip(f"shared UPM data not found at {prog}")
+    p = tp.BlockPath.from_program(tp.read_nc_program(prog), nose_radius=189.36e-6,
+                                  block_time=1e-3)
+    assert p.n_revolutions == pytest.approx(38.0)
+    assert p.t.size == 27361 and p.duration == pytest.approx(27.36)
+    # SOURCES.md: feed per revolution 25.9-33.2 um, mean 28.9 um, on r = 0.05-0.5 mm
+    r, f = p.feed_per_revolution()
+    m = (r >= 0.05e-3) & (r <= 0.5e-3)
+    assert f[m].min() == pytest.approx(25.9e-6, abs=0.05e-6)
+    assert f[m].max() == pytest.approx(33.2e-6, abs=0.05e-6)
+    assert f[m].mean() == pytest.approx(28.9e-6, abs=0.05e-6)

@@ -347,12 +347,16 @@ def _finish_nc(args, res, tp, fmt) -> int:
             from ..viz._mesh import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
-    summary.update(settings=res.settings, files=files, toolpath=str(tp))
+    summary.update(settings=res.settings, files=files, input_file=str(tp))
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
     else:
         rough = summary["roughness"]
+        if rough["ra_m"] is None:
+            print(f"centre profile: roughness not evaluated "
+                  f"({rough['not_evaluated']}); written to {out}")
+            return 0
         print(f"centre profile: Ra {rough['ra_m'] * 1e9:.1f} nm, Rq "
               f"{rough['rq_m'] * 1e9:.1f} nm, Rz {rough['rz_m'] * 1e9:.1f} nm, RSm "
               f"{rough['rsm_m'] * 1e6:.2f} um (cut-off {rough['cutoff_m'] * 1e3:g} "

@@ -5,9 +5,8 @@ Conventions stated once (all values SI):
 * **Centre profile**: the row of the map through the spindle axis (y = 0 on the
   default band), x from -R_max to +R_max (the band's columns; negative x lies half
   a turn from positive x).
-* **Form removal**: the commanded tool-tip height at radius ``|x|`` (the lowest
-  tip height of the program in bins of one pixel pitch:
-  :meth:`BlockPath.radial_form`) is subtracted, then a least-squares quadratic over
+* **Form removal**: the commanded tool-tip height at radius ``|x|``
+  (:meth:`BlockPath.radial_form`) is subtracted, then a least-squares quadratic over
   the evaluated profile (piston, tilt and the smooth difference between the tip
   path and the nose envelope on a curved part), as a metrologist removes the form
   of a measured profile.
@@ -32,6 +31,9 @@ from ..errors import ConfigError
 from ..metrology._surface import Profile, Surface
 
 __all__ = ["analyse_nc", "centre_profile"]
+
+_ROUGH_KEYS = ("ra_m", "rq_m", "rz_m", "rsm_m", "rt_m", "cutoff_m", "cutoff_rule",
+               "evaluation_length_m", "trim_length_m", "rz_sampling_lengths")
 
 
 def centre_profile(surface: Surface, path, *,
@@ -67,7 +69,7 @@ def centre_profile(surface: Surface, path, *,
             f"the field does not cross the spindle axis (rows at y = {y[0]:g}.."
             f"{y[-1]:g} m): the centre profile needs a row through y = 0")
     z = np.asarray(surface.z[row], dtype=np.float64)
-    form = path.radial_form(np.abs(x), surface.dx)
+    form = path.radial_form(np.abs(x))
     resid = z - form
     keep = np.isfinite(resid)
     if profile_length is not None:
@@ -120,7 +122,12 @@ def analyse_nc(result, *, profile_length: float | None = None,
     prof = centre_profile(surface, path, profile_length=profile_length)
     lo, hi = prof["span"]
     p = Profile(prof["residual"][lo:hi], surface.dx, x0=float(prof["x"][lo]))
-    rough = profile_roughness(p)
+    try:
+        rough = profile_roughness(p)
+    except ConfigError as exc:  # a profile too short for any ISO 4288 cut-off
+        rough = dict.fromkeys(_ROUGH_KEYS)
+        rough.update(cutoff_rule="ISO 4288", trim_length_m=0.0,
+                     not_evaluated=str(exc))
     r_f, feed = path.feed_per_revolution()
     inside = r_f > 0.05 * path.r_max
     f_in = np.abs(feed[inside]) if inside.any() else np.abs(feed)
@@ -129,10 +136,9 @@ def analyse_nc(result, *, profile_length: float | None = None,
     out: dict[str, Any] = {
         "analysed_map": "measured" if surface is result.measured else "model",
         "roughness": {
-            **{k: rough[k] for k in ("ra_m", "rq_m", "rz_m", "rsm_m", "rt_m",
-                                     "cutoff_m", "cutoff_rule",
-                                     "evaluation_length_m", "trim_length_m",
-                                     "rz_sampling_lengths")},
+            **{k: rough[k] for k in _ROUGH_KEYS},
+            **({"not_evaluated": rough["not_evaluated"]}
+               if "not_evaluated" in rough else {}),
             "profile": "centre row (through the spindle axis)",
             "profile_length_m": float((hi - lo) * surface.dx),
             "form_removal": "commanded tip height at |x|, then a least-squares "

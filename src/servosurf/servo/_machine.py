@@ -504,13 +504,17 @@ def load_machine(source: str | Path | None = None) -> Machine:
             )
     data = load_toml(path)
     parent = data.pop("inherit", None)
-    if parent is not None:
-        if not isinstance(parent, str) or parent not in builtins:
+    seen: set[str] = set()
+    while parent is not None:  # a built-in may inherit another one
+        if not isinstance(parent, str) or parent not in builtins or parent in seen:
             raise ConfigError(
                 f"{path}: inherit must name a built-in machine "
                 f"({', '.join(builtins)}), got {parent!r}"
             )
-        data = _merge(load_toml(builtins[parent]), data)
+        seen.add(parent)
+        base = load_toml(builtins[parent])
+        parent = base.pop("inherit", None)
+        data = _merge(base, data)
     try:
         machine = from_mapping(Machine, data)
     except ConfigError as exc:

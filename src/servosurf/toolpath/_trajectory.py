@@ -458,30 +458,40 @@ class BlockPath:
             return np.zeros(0), np.zeros(0)
         return np.concatenate(rs), np.concatenate(fs)
 
-    def radial_form(self, radius: np.ndarray, bin_width: float) -> np.ndarray:
-        """Lowest commanded tip height at each radius: the path's form, in m.
+    def radial_form(self, radius: np.ndarray) -> np.ndarray:
+        """Commanded tip height as a function of radius: the path's form, in m.
 
         Parameters
         ----------
         radius : ndarray
             Radii at which to evaluate, in m.
-        bin_width : float
-            Radial bin width in m over which the lowest vertex height is taken.
 
         Returns
         -------
         ndarray
-            Heights in m, interpolated between bins; the path's end values beyond
-            its radial range.
+            Per cutting run, the tip height interpolated linearly over the run's
+            vertices sorted by radius (exact for a spiral, whose radius changes
+            monotonically); the lowest over the runs that reach the radius (the
+            last cut leaves the lowest surface). The nearest run's end value
+            beyond every run's radial range.
         """
-        w = float(bin_width)
-        idx = np.floor(self.r / w).astype(np.int64)
-        order = np.argsort(idx, kind="stable")
-        idx_s, z_s = idx[order], self.z[order]
-        uniq, first = np.unique(idx_s, return_index=True)
-        zmin = np.minimum.reduceat(z_s, first)
-        centres = (uniq + 0.5) * w
-        return np.interp(np.asarray(radius, dtype=float), centres, zmin)
+        q = np.asarray(radius, dtype=float)
+        best = np.full(q.shape, np.inf)
+        ends = []
+        for j in range(self.n_runs):
+            m = self.run == j
+            order = np.argsort(self.r[m], kind="stable")
+            r, z = self.r[m][order], self.z[m][order]
+            inside = (q >= r[0]) & (q <= r[-1])
+            best = np.where(inside, np.minimum(best, np.interp(q, r, z)), best)
+            ends.append((r[0], z[0], r[-1], z[-1]))
+        out = best
+        miss = ~np.isfinite(out)
+        if miss.any():
+            lo = min(ends, key=lambda e: e[0])
+            hi = max(ends, key=lambda e: e[2])
+            out = np.where(miss, np.where(q < lo[0], lo[1], hi[3]), out)
+        return out
 
     def describe(self) -> dict[str, Any]:
         """JSON-ready description of the path (SI units)."""

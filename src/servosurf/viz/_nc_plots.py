@@ -87,7 +87,7 @@ def plot_band_map(surface, path, out: str | Path, *, title: str = "") -> Path:
     """
     x, y = surface.coords()
     rr = np.hypot(x[None, :], y[:, None])
-    res = surface.z - path.radial_form(rr, surface.dx)
+    res = surface.z - path.radial_form(rr)
     fig, ax = figure(2, 1, figsize=(10, 4.6), sharex=True)
     finite = res[np.isfinite(res)]
     lo, hi = (np.percentile(finite, [1, 99]) * 1e9) if finite.size else (0, 1)
@@ -136,8 +136,12 @@ def plot_centre_profile(profile: dict[str, Any], roughness: dict[str, Any],
             ax[0].axvline(v * 1e3, color="C3", lw=0.8, ls="--")
     ax[0].set_xlabel("x [mm]")
     ax[0].set_ylabel("height [nm]")
-    ax[0].set_title(f"centre profile, form removed (evaluation between the dashed "
-                    f"lines, \u03bbc = {roughness['cutoff_m'] * 1e3:g} mm)")
+    if roughness.get("cutoff_m"):
+        ax[0].set_title(f"centre profile, form removed (evaluation between the "
+                        f"dashed lines, \u03bbc = {roughness['cutoff_m'] * 1e3:g} mm)")
+    else:
+        ax[0].set_title("centre profile, form removed (too short for an ISO 4288 "
+                        "cut-off)")
     mid = 0.5 * (x[lo] + x[hi - 1])
     w = min(0.1e-3, 0.5 * (x[hi - 1] - x[lo]))
     m = (x >= mid - w / 2) & (x <= mid + w / 2)
