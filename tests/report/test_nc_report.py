@@ -74,6 +74,26 @@ def test_form_is_removed_on_a_curved_part():
     assert rough["ra_m"] == pytest.approx(scallop_ra(f, r_eff), rel=0.01)
 
 
+def test_non_quadratic_form_is_removed():
+    # the tip path carries a long-wave form a quadratic cannot remove (0.1 um,
+    # 0.4 mm wavelength, slope <= 1.6e-3: the nose envelope follows the tip path to
+    # R s^2 / 2 < 1 nm); the commanded tip height at |x| removes it
+    f, R = 10e-6, 0.5e-3
+    c = np.arange(0, 60 * 360 + 1, 2.0)
+    x = 0.6 - 0.010 * c / 360
+    z = 1e-4 * np.cos(2 * np.pi * x / 0.4)  # mm
+    text = "\n".join(f"C{a:g} X{b:.9f} Z{d:.12f}" for a, b, d in zip(c, x, z,
+                                                                       strict=True))
+    spec = tp.nc_spec(tp.read_nc_program(io.StringIO(text)), block_time=1e-3,
+                      tool=tp.Tool(nose_radius=R))
+    res = simulate(spec, parts=("kinematic",))
+    prof = centre_profile(res.surface, spec.path)
+    assert np.nanmax(np.abs(prof["residual"])) < 50e-9
+    # the form's curvature (<= 25 /m) changes the local scallop radius by <= 1.2 %
+    rough = analyse_nc(res)["roughness"]
+    assert rough["ra_m"] == pytest.approx(scallop_ra(f, R), rel=0.02)
+
+
 def test_centre_profile_needs_the_axis_and_enough_length():
     res = facing_run(f_mm=0.010, r0_mm=0.06)
     out = analyse_nc(res)

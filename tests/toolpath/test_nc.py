@@ -222,6 +222,9 @@ def test_csv_blocks():
     np.testing.assert_allclose(other.x, [1e-3, 0.5e-3])
     np.testing.assert_allclose(other.z, [0.0, -1e-6])
     np.testing.assert_allclose(deg(other), [0.0, 90.0])
+    # C unwrapped as in programs
+    wrap = read("c_deg,x_m,z_m\n359,1e-3,0\n359.5,1e-3,0\n0,1e-3,0\n", format="csv")
+    np.testing.assert_allclose(deg(wrap), [359.0, 359.5, 360.0])
     with pytest.raises(ConfigError, match="line 3: c_deg value 'abc' is not a number"):
         read("c_deg,x_m,z_m\n0,1e-3,0\nabc,1e-3,0\n", format="csv")
     with pytest.raises(ConfigError, match="header must be c_deg,x_m,z_m"):

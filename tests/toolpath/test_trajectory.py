@@ -126,13 +126,14 @@ def test_rotation_sense_and_mirror_frame():
 
 
 def test_block_across_the_axis_is_split():
-    # X from +0.1 to -0.1 mm while C turns 0 -> 90 degrees: the axis at 45 degrees
-    p = path_of("C0 X0.1 Z0\nC90 X-0.1 Z-0.002\n", spindle_speed=0.25)
-    np.testing.assert_allclose(p.r, np.array([0.1, 0.0, 0.0, 0.1]) * MM, atol=1e-18)
+    # X from +0.1 to -0.3 mm while C turns 0 -> 90 degrees: the axis a quarter of
+    # the way, at 22.5 degrees
+    p = path_of("C0 X0.1 Z0\nC90 X-0.3 Z-0.002\n", spindle_speed=0.25)
+    np.testing.assert_allclose(p.r, np.array([0.1, 0.0, 0.0, 0.3]) * MM, atol=1e-18)
     np.testing.assert_allclose(
-        p.theta, [0.0, math.pi / 4, math.pi / 4 + math.pi, math.pi / 2 + math.pi])
-    np.testing.assert_allclose(p.t, [0.0, 0.5, 0.5, 1.0])
-    np.testing.assert_allclose(p.z, [0.0, -1e-6, -1e-6, -2e-6])
+        p.theta, [0.0, math.pi / 8, math.pi / 8 + math.pi, math.pi / 2 + math.pi])
+    np.testing.assert_allclose(p.t, [0.0, 0.25, 0.25, 1.0])
+    np.testing.assert_allclose(p.z, [0.0, -0.5e-6, -0.5e-6, -2e-6])
     # entirely past the axis: radius |X|, half a turn on
     q = path_of("C0 X-0.1 Z0\nC90 X-0.2 Z0\n", spindle_speed=0.25)
     np.testing.assert_allclose(q.r, np.array([0.1, 0.2]) * MM)
@@ -307,9 +308,10 @@ def _brute_force(c_deg, x, z, R, hw, px, py):
 
 
 def test_path_across_the_axis_matches_signed_brute_force():
-    # a facing spiral from X = +40 um through the axis to X = -40 um
+    # a facing spiral from X = +40 um through the axis (inside a block, at C =
+    # 712.9 degrees) to X = -41 um
     c = np.arange(0, 4 * 360 + 1, 2.0)
-    x = 0.04 - 0.08 * c / c[-1]
+    x = 0.04 - 0.081 * c / c[-1]
     z = -0.001 + 0.0002 * np.cos(np.radians(3 * c))
     text = "\n".join(f"C{a:g} X{b:.9f} Z{d:.9f}" for a, b, d in zip(c, x, z,
                                                                       strict=True))

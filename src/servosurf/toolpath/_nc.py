@@ -74,14 +74,27 @@ Cutting blocks and links
 
 Signs and frames
 ----------------
-X is the radius of the tool reference (negative X lies past the spindle axis), Z
-the axial position, positive away from the part, and C the spindle angle. C values
-are angles modulo 360 degrees: each absolute C is unwrapped to the angle nearest the
-previous C (a block turns less than 180 degrees), so ``C359.5`` followed by ``C0``
-is a step of +0.5 degree. Which sense C turns the part, the reference point of the
-path (tool tip or nose centre) and the time base are settings of
-:class:`~servosurf.toolpath.BlockPath`; a DIFFSYS header states the reference point
-and the tool radius (:attr:`NCProgram.reference`, :attr:`NCProgram.tool_radius`).
+X is the radius of the tool reference (negative X lies past the spindle axis, half
+a turn away), Z the axial position, positive away from the part (a lower Z cuts
+deeper; z in servosurf's frame is the program's Z), and C the spindle angle. C
+values are angles modulo 360 degrees: each absolute C is unwrapped to the angle
+nearest the previous C (a block turns less than 180 degrees), so ``C359.5``
+followed by ``C0`` is a step of +0.5 degree.
+
+What the reader does not decide, :class:`~servosurf.toolpath.BlockPath` does, from
+the file or the user:
+
+* **Reference point**: the program's Z is the tool tip (front point, the lowest
+  point of the nose arc; the default, and what the UPM programs write) or the nose
+  centre (converted to the tip: ``z_tip = z - R``). A DIFFSYS header states it
+  (``Reference Point : Front point``) with the tool radius
+  (:attr:`NCProgram.reference`, :attr:`NCProgram.tool_radius`); otherwise the user
+  does (``tool.reference``, ``--reference``), and a contradiction is an error.
+* **Rotation sense**: ``ccw`` (default): as C increases the tool moves
+  counter-clockwise over the part seen from the tool side (+z), i.e. the tool's
+  angle in the part frame is ``+C``; ``cw``: ``-C``.
+* **Time base**: the program's G93 feeds when they give a plausible spindle speed,
+  else ``--spindle-rpm`` or ``--block-time`` (required, the error says so).
 """
 
 from __future__ import annotations
