@@ -52,11 +52,16 @@ __all__ = [
     "realisation_study",
     "RealisationStudy",
     "PARTS",
+    "KINEMATIC",
     "SETTLE_TIME",
 ]
 
 #: Deviation parts that can be switched on and off.
 PARTS = ("tracking", "force", "vibration")
+#: The commanded path alone (no loop, no axis dynamics); not combined with PARTS.
+KINEMATIC = "kinematic"
+#: Default machine of NC programs: ideal machine axes (a kinematic run).
+NC_MACHINE = "sts-ideal-axes"
 #: Pre-roll before the first sample that can cut the field, in s (loop settling).
 SETTLE_TIME = 0.05
 #: Refuse a continuous time span longer than this many samples (memory guard).
@@ -114,10 +119,12 @@ class SimulationResult:
 
 
 def _reach(spec, tool) -> float:
-    """Radial reach (m) of the tool arc below the pre-cut face."""
+    """Radial reach (m) of the tool arc below the pre-cut face (the whole arc for
+    paths without a depth of cut, such as NC programs)."""
     from .toolpath import field_reach
 
-    return field_reach(tool, spec.path.depth_of_cut)  # + 1 um margin for deviations
+    # + 1 um margin for deviations
+    return field_reach(tool, getattr(spec.path, "depth_of_cut", None))
 
 
 def _span(spec, tool) -> tuple[float, float]:
@@ -133,6 +140,37 @@ def _span(spec, tool) -> tuple[float, float]:
     return span
 
 
+def _kernel_field(spec):
+    """The field in the sweep kernel's frame (mirrored for some NC paths)."""
+    kf = getattr(spec.path, "kernel_field", None)
+    return spec.field if kf is None else kf(spec.field)
+
+
+def _initial(spec, workpiece):
+    """Pre-cut height for the sweep: the workpiece's, or no material limit (+inf)
+    for an NC program on a flat workpiece (a curved part's blank lies above the
+    path; the surface is the lower envelope of every cutting block)."""
+    if workpiece.precut.kind == "flat":
+        if spec.kind == "nc":
+            return np.inf
+        return float(workpiece.precut.height)
+    from .io import read_surface
+
+    return read_surface(workpiece.precut.file)
+
+
+def _physical(spec, surface):
+    """Undo the kernel frame (mirror) and mark never-cut pixels (+inf) as NaN."""
+    unmirror = getattr(spec.path, "unmirror", None)
+    if unmirror is None:
+        return surface
+    surface = unmirror(surface)
+    z = surface.z
+    if np.isinf(z).any():
+        surface = surface.replace(z=np.where(np.isinf(z), np.nan, z))
+    return surface
+
+
 def simulate(
     toolpath,
     *,
@@ -141,7 +179,7 @@ def simulate(
     bandwidth: float | None = None,
     mass: float | None = None,
     seed: int = 0,
-    parts: Sequence[str] = PARTS,
+    parts: Sequence[str] | None = None,
     instrument=None,
     hooks: Sequence[Any] = (),
     n_threads: int | None = None,
@@ -153,7 +191,8 @@ def simulate(
     toolpath : ToolpathSpec, str or Path
         Toolpath specification or TOML file.
     machine : Machine, str or Path, optional
-        Machine or machine file / built-in name (default: the seed prototype).
+        Machine or machine file / built-in name (default: the seed prototype; for
+        NC programs ``sts-ideal-axes``, ideal machine axes).
     workpiece : Workpiece, str or Path, optional
         Workpiece or file (default: electroless NiP, flat pre-cut face).
     bandwidth : float, optional
@@ -162,8 +201,12 @@ def simulate(
         Moving mass m1 + m2 in kg (default: the machine's).
     seed : int, default: 0
         Seed of the vibration realisation and the instrument noise.
-    parts : sequence of str, default: ("tracking", "force", "vibration")
-        Deviation parts to include (any subset of :data:`PARTS`).
+    parts : sequence of str, optional
+        Deviation parts to include: any subset of :data:`PARTS` (default: all of
+        them for the FTS; ``("tracking", "vibration")`` for an NC program on the
+        FTS; ``("tracking",)`` on a second-order axis), or ``("kinematic",)``:
+        the commanded path alone, swept at its own resolution (NC programs: the
+        block end points) without the loop.
     instrument : Interferometer, str or None, optional
         Interferometer model applied to the machined map (None: no measurement model).
     hooks : sequence, optional
@@ -179,14 +222,23 @@ def simulate(
     from .noise._synthesis import realise
     from .toolpath import ToolpathSpec, check_clearance, load_toolpath, sample, sweep
 
-    bad = [p for p in parts if p not in PARTS]
-    if bad:
-        raise ConfigError(
-            f"unknown deviation part {bad[0]!r}; allowed: {', '.join(PARTS)}"
-        )
+    if parts is not None:
+        parts = tuple(parts)
+        bad = [p for p in parts if p not in (*PARTS, KINEMATIC)]
+        if bad:
+            raise ConfigError(
+                f"unknown deviation part {bad[0]!r}; allowed: {', '.join(PARTS)} "
+                f"or {KINEMATIC} alone"
+            )
+        if KINEMATIC in parts and len(parts) > 1:
+            raise ConfigError(
+                f"part {KINEMATIC!r} is the commanded path alone; it cannot be "
+                f"combined with {', '.join(p for p in parts if p != KINEMATIC)}")
     if not isinstance(seed, int | np.integer) or seed < 0:
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
     spec = toolpath if isinstance(toolpath, ToolpathSpec) else load_toolpath(toolpath)
+    if machine is None and spec.kind == "nc":
+        machine = NC_MACHINE
     if not isinstance(machine, Machine):
         machine = load_machine(machine)
     if mass is not None:
@@ -203,6 +255,17 @@ def simulate(
             tool = h.tool(tool)
     if tool is not spec.tool:
         spec = dataclasses.replace(spec, tool=tool)
+    if (parts is not None and KINEMATIC in parts) or machine.axis.model != "fts":
+        from ._simulate_axes import simulate_axes
+
+        return simulate_axes(spec, tool, machine, workpiece, parts, seed=int(seed),
+                             instrument=instrument, hooks=hooks, n_threads=n_threads)
+    if parts is None:
+        parts = ("tracking", "vibration") if spec.kind == "nc" else PARTS
+    if spec.kind == "nc" and "force" in parts:
+        raise ConfigError(
+            "the cutting-force part needs the chip of a facing or lenslet path; for "
+            "an NC program use parts tracking and vibration, or kinematic")
     fs = machine.controller.sample_rate
 
     with _progress.stage("servo loop"):
@@ -214,7 +277,9 @@ def simulate(
             )
 
     t0, t1 = _span(spec, tool)
-    k0 = max(int(np.floor((t0 - SETTLE_TIME) * fs)), 0)
+    k0 = int(np.floor((t0 - SETTLE_TIME) * fs))
+    if spec.kind != "nc":  # an NC path holds its first point before t = 0
+        k0 = max(k0, 0)
     k1 = int(np.ceil(t1 * fs)) + 2
     n = k1 - k0
     if n > MAX_SPAN_SAMPLES:
@@ -273,9 +338,10 @@ def simulate(
                 )
         dev["hooks"] = extra
 
+    kfield = _kernel_field(spec)
     with _progress.stage("toolpath samples over the field"):
         path = sample(
-            spec, fs=fs, field=spec.field, tool=tool, reach=_reach(spec, tool)
+            spec, fs=fs, field=kfield, tool=tool, reach=_reach(spec, tool)
         )
         idx = path.index - k0
         if idx.size and (idx.min() < 0 or idx.max() >= n):
@@ -285,14 +351,9 @@ def simulate(
         check_clearance(path, tool)
 
     with _progress.stage(f"kernel on {spec.field.ny} x {spec.field.nx} grid"):
-        initial = None
-        if workpiece.precut.kind == "flat":
-            initial = float(workpiece.precut.height)
-        else:
-            from .io import read_surface
-
-            initial = read_surface(workpiece.precut.file)
-        surface = sweep(path, tool, spec.field, initial=initial, n_threads=n_threads)
+        surface = sweep(path, tool, kfield, initial=_initial(spec, workpiece),
+                        n_threads=n_threads)
+        surface = _physical(spec, surface)
 
     ctx = {
         "spec": spec,
@@ -321,6 +382,8 @@ def simulate(
         "controller_rate_hz": fs,
         "hooks": [type(h).__name__ for h in hooks],
     }
+    if spec.kind == "nc":
+        settings["nc"] = spec.path.describe()
     surface = surface.replace(metadata={**surface.metadata, "simulation": settings})
     measured = None
     if instrument is not None:

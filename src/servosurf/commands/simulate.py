@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from ._common import add_scheduler_args
 
@@ -17,7 +18,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "tracking, cutting-force and vibration deviations; write the height map, "
         "summary.json and PNG figures. Bandwidths are open-loop crossover frequencies.",
     )
-    p.add_argument("toolpath", metavar="TOOLPATH.toml", help="toolpath definition")
+    p.add_argument(
+        "toolpath",
+        metavar="TOOLPATH.toml|PROGRAM",
+        help="toolpath definition (TOML), or an NC program: G-code (.nc, .txt, "
+        "...), a DIFFSYS .pgm job or a c_deg,x_m,z_m .csv",
+    )
     p.add_argument(
         "--workpiece",
         metavar="W.toml",
@@ -47,16 +53,20 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--parts",
         metavar="PART",
         nargs="+",
-        choices=("tracking", "force", "vibration"),
-        default=["tracking", "force", "vibration"],
-        help="deviation parts to include (default: all)",
+        choices=("tracking", "force", "vibration", "kinematic"),
+        default=None,
+        help="deviation parts to include: tracking, force, vibration (default: all "
+        "of them on the FTS, tracking on a second-order machine axis), or kinematic "
+        "alone: the commanded path without the loop (the default of NC programs, "
+        "whose default machine has ideal axes)",
     )
     p.add_argument(
         "--instrument",
         metavar="NAME",
-        default="cp300-20x",
-        help="interferometer model applied to the machined map: cp300-20x (default, "
-        "the paper's instrument), newview-20x/50x/100x, or none",
+        default=None,
+        help="interferometer model applied to the machined map: cp300-20x (default "
+        "for TOML toolpaths, the paper's instrument), newview-20x/50x/100x, or none "
+        "(default for NC programs)",
     )
     p.add_argument(
         "--format",
@@ -86,22 +96,128 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "write realisations.json (per-seed metrics in SI and their statistics) and "
         "realisations.png instead of one map (default 1)",
     )
-    p.add_argument(
-        "--tool",
-        metavar="EDGE",
-        help="measured tool-edge trace (laser-probe CSV, or x,[y,]z rows in mm): "
-        "its fitted nose radius (m), usable arc and edge deviation replace the "
-        "toolpath's tool; writes tool_edge.png",
-    )
-    p.add_argument(
-        "--edge-compensated",
-        action="store_true",
-        help="with --tool: the path already compensates this measured edge, so "
-        "only its fitted radius enters the sweep (not its deviation)",
-    )
     add_scheduler_args(p, "the realisations (one task per seed)")
     p.add_argument("--json", action="store_true", help="print summary.json on stdout")
+    _add_nc_args(p)
     return p
+
+
+def _add_nc_args(p) -> None:
+    """Flags of NC programs (and the tool of any toolpath)."""
+    g = p.add_argument_group(
+        "NC programs", "time base and conventions of an NC program (a PROGRAM given "
+        "directly, or a TOML of kind nc whose [nc] values these replace)")
+    tb = g.add_mutually_exclusive_group()
+    tb.add_argument("--spindle-rpm", metavar="N", type=float, default=None,
+                    help="spindle speed in rev/min: C turns at this constant speed")
+    tb.add_argument("--block-time", metavar="S", type=float, default=None,
+                    help="duration of every cutting block, in s")
+    g.add_argument("--feed-per-rev", metavar="M", type=float, default=None,
+                   help="two-axis programs (DIFFSYS .pgm): path length per "
+                   "revolution in m (with --spindle-rpm)")
+    g.add_argument("--reference", choices=("tip", "centre"), default=None,
+                   help="the program's Z is the tool tip (front point) or the nose "
+                   "centre (default: what the program states, else tip)")
+    g.add_argument("--rotation", choices=("ccw", "cw"), default=None,
+                   help="sense in which the tool moves over the part, seen from the "
+                   "tool side, as C increases (default ccw: theta = +C)")
+    g.add_argument("--units", choices=("mm", "inch"), default=None,
+                   help="units of a program that sets none (default mm)")
+    g.add_argument("--profile-length", metavar="M", type=float, default=None,
+                   help="length in m of the centre profile evaluated for roughness, "
+                   "centred on the axis (default: the whole band); give the "
+                   "measuring instrument's profile length to compare like with like")
+    tool = p.add_argument_group("tool", "the cutting tool (replaces the file's)")
+    edge = tool.add_mutually_exclusive_group()
+    edge.add_argument("--tool-radius", metavar="M", type=float, default=None,
+                      help="tool nose radius in m (e.g. 189.36e-6)")
+    edge.add_argument(
+        "--tool", metavar="EDGE",
+        help="measured tool-edge trace (laser-probe CSV, or x,[y,]z rows in mm): "
+        "its fitted nose radius (m), usable arc and edge deviation replace the "
+        "toolpath's tool; writes tool_edge.png")
+    tool.add_argument(
+        "--edge-compensated", action="store_true",
+        help="with --tool: the path already compensates this measured edge, so "
+        "only its fitted radius enters the sweep (not its deviation)")
+
+
+def _check_cli_values(args) -> None:
+    """Refuse physically absurd flag values early, naming the likely unit slip."""
+    from ..errors import ConfigError
+
+    r = args.tool_radius
+    if r is not None:
+        if not (math.isfinite(r) and r > 0):
+            raise ConfigError(
+                f"--tool-radius must be a positive radius in m, got {r!r}")
+        if r > 0.02:
+            raise ConfigError(
+                f"--tool-radius {r:g} m is not a diamond tool's nose radius (at most "
+                f"0.02 m): a value in um or mm? {r:g} um = {r * 1e-6:g} m, "
+                f"{r:g} mm = {r * 1e-3:g} m")
+        if r < 1e-6:
+            raise ConfigError(f"--tool-radius {r:g} m is below 1 um: a value in m is "
+                              "expected (e.g. 189.36e-6)")
+    n = args.spindle_rpm
+    if n is not None and not (math.isfinite(n) and 0 < n <= 20000):
+        raise ConfigError(f"--spindle-rpm must be in (0, 20000] rev/min, got {n!r}")
+    b = args.block_time
+    if b is not None and not (math.isfinite(b) and 0 < b <= 60):
+        raise ConfigError(f"--block-time must be in (0, 60] s per block, got {b!r} "
+                          "(a value in ms?)" if (b is not None and b > 60) else
+                          f"--block-time must be in (0, 60] s per block, got {b!r}")
+    f = args.feed_per_rev
+    if f is not None and not (math.isfinite(f) and 0 < f <= 1e-3):
+        raise ConfigError(f"--feed-per-rev must be in (0, 1e-3] m, got {f!r} (a value "
+                          "in um or mm?)")
+    L = args.profile_length
+    if L is not None and not (math.isfinite(L) and 0 < L <= 1.0):
+        raise ConfigError(f"--profile-length must be in (0, 1] m, got {L!r} (a value "
+                          "in mm?)")
+
+
+def _nc_overrides(args) -> dict:
+    """NCSettings fields given on the command line (None: not given)."""
+    return {
+        "spindle_speed": None if args.spindle_rpm is None else args.spindle_rpm / 60.0,
+        "block_time": args.block_time,
+        "feed_per_rev": args.feed_per_rev,
+        "reference": args.reference,
+        "rotation": args.rotation,
+        "units": args.units,
+    }
+
+
+def load_spec(args):
+    """The toolpath spec of the positional argument (TOML or NC program)."""
+    import dataclasses
+    from pathlib import Path
+
+    from ..errors import ConfigError
+    from ..toolpath import Tool, load_toolpath, nc_spec
+
+    tp = Path(args.toolpath)
+    if not tp.is_file():
+        raise ConfigError(f"{tp}: toolpath file not found")
+    nc = _nc_overrides(args)
+    if tp.suffix.lower() == ".toml":
+        spec = load_toolpath(tp, nose_radius=args.tool_radius, nc_overrides=nc)
+        if spec.kind != "nc":
+            given = [f"--{k.replace('_', '-')}" for k in
+                     ("spindle_rpm", "block_time", "feed_per_rev", "reference",
+                      "rotation", "units", "profile_length")
+                     if getattr(args, k) is not None]
+            if given:
+                raise ConfigError(f"{given[0]} applies to NC programs; {tp} is a "
+                                  f"{spec.kind} toolpath")
+            if args.tool_radius is not None:
+                spec = dataclasses.replace(
+                    spec, tool=dataclasses.replace(spec.tool,
+                                                   nose_radius=args.tool_radius))
+        return spec
+    tool = None if args.tool_radius is None else Tool(nose_radius=args.tool_radius)
+    return nc_spec(tp, tool=tool, **{k: v for k, v in nc.items() if v is not None})
 
 
 def _write_map(surface, path, fmt):
@@ -124,6 +240,8 @@ def run(args) -> int:
     from ..viz import _surface_plots as sp
     from ._common import out_dir, print_json, write_json
 
+    _check_cli_values(args)
+
     if args.bandwidth is not None and not (
         np.isfinite(args.bandwidth) and args.bandwidth > 0
     ):
@@ -134,25 +252,28 @@ def run(args) -> int:
         raise ConfigError(f"--mass must be a positive mass in kg, got {args.mass!r}")
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
-    tp = Path(args.toolpath)
-    if not tp.is_file():
-        raise ConfigError(f"{tp}: toolpath file not found")
     if args.realisations < 1:
         raise ConfigError(f"--realisations must be >= 1, got {args.realisations}")
+    tp = Path(args.toolpath)
+    spec = load_spec(args)
     fmt = args.format or "datx"
-    out = out_dir(args.out or Path("results") / tp.stem)
+    instrument = args.instrument or ("none" if spec.kind == "nc" else "cp300-20x")
     settings = {  # the paper's cutting set-up unless given
         "machine": args.machine,
         "workpiece": args.workpiece,
         "bandwidth": 1448.0 if args.bandwidth is None else args.bandwidth,
         "mass": 0.175 if args.mass is None else args.mass,
-        "parts": tuple(args.parts),
-        "instrument": None if args.instrument == "none" else args.instrument,
+        "parts": None if args.parts is None else tuple(args.parts),
+        "instrument": None if instrument == "none" else instrument,
     }
     edge = _measured_edge(args, settings)
     if args.realisations > 1:
-        return _run_realisations(args, tp, out, settings)
-    res = simulate(tp, seed=args.seed, **settings)
+        out = out_dir(args.out or Path("results") / tp.stem)
+        return _run_realisations(args, spec, tp, out, settings)
+    res = simulate(spec, seed=args.seed, **settings)
+    if spec.kind == "nc":
+        return _finish_nc(args, res, tp, fmt)
+    out = out_dir(args.out or Path("results") / tp.stem)
     with stage("analysis"):
         summary = analyse(res)
     plots = summary.pop("_plots")
@@ -183,8 +304,9 @@ def run(args) -> int:
                     y, z, fe["reference"], fe["error"], out / "profile.png"
                 )
             )
-        _plot_deviation(res, out / "deviation.png")
-        files["deviation_png"] = str(out / "deviation.png")
+        if res.t.size:
+            _plot_deviation(res, out / "deviation.png")
+            files["deviation_png"] = str(out / "deviation.png")
         if not args.no_render:
             from ..viz._render import render_surface
 
@@ -233,7 +355,47 @@ def _measured_edge(args, settings):
     return edge
 
 
-def _run_realisations(args, tp, out, settings) -> int:
+def _finish_nc(args, res, tp, fmt) -> int:
+    """Analysis, map, figures and summary of an NC-program run."""
+    from pathlib import Path
+
+    from .._progress import stage
+    from ..report import analyse_nc
+    from ..viz._nc_plots import nc_figures
+    from ._common import out_dir, print_json, write_json
+
+    with stage("analysis of the centre profile"):
+        summary = analyse_nc(res, profile_length=args.profile_length)
+    plots = summary.pop("_plots")
+    out = out_dir(args.out or Path("results") / tp.stem)
+    surf = res.measured if res.measured is not None else res.surface
+    files = {}
+    with stage("writing map and figures"):
+        files["map"] = str(_write_map(surf, out / f"surface.{fmt}", fmt))
+        files.update(nc_figures(res, plots, out, name=tp.stem))
+        if args.mesh:
+            from ..viz._mesh import write_mesh
+
+            files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
+    summary.update(settings=res.settings, files=files, input_file=str(tp))
+    write_json(out / "summary.json", summary)
+    if args.json:
+        print_json(summary)
+    else:
+        rough = summary["roughness"]
+        if rough["ra_m"] is None:
+            print(f"centre profile: roughness not evaluated "
+                  f"({rough['not_evaluated']}); written to {out}")
+            return 0
+        print(f"centre profile: Ra {rough['ra_m'] * 1e9:.1f} nm, Rq "
+              f"{rough['rq_m'] * 1e9:.1f} nm, Rz {rough['rz_m'] * 1e9:.1f} nm, RSm "
+              f"{rough['rsm_m'] * 1e6:.2f} um (cut-off {rough['cutoff_m'] * 1e3:g} "
+              f"mm, evaluation length {rough['evaluation_length_m'] * 1e3:.3g} mm); "
+              f"written to {out}")
+    return 0
+
+
+def _run_realisations(args, spec, tp, out, settings) -> int:
     """``--realisations K``: one simulation per seed, metrics and their spread.
 
     ``settings`` are the :func:`~servosurf.simulation.simulate` keywords but the seed.
@@ -246,7 +408,7 @@ def _run_realisations(args, tp, out, settings) -> int:
     with dask_client(args.scheduler, args.workers) as client, \
             stage(f"{len(seeds)} realisations (seeds {seeds[0]}..{seeds[-1]})"):
         study = realisation_study(
-            tp,
+            spec,
             seeds=seeds,
             client=client,
             progress=lambda it, total=None: bar(it, total=total, desc="realisations"),
@@ -256,7 +418,8 @@ def _run_realisations(args, tp, out, settings) -> int:
     summary.update(toolpath=str(tp), scheduler=args.scheduler,
                    bandwidth_hz=settings["bandwidth"],
                    moving_mass_kg=settings["mass"],
-                   parts=list(args.parts), instrument=args.instrument)
+                   parts=None if args.parts is None else list(args.parts),
+                   instrument=settings["instrument"] or "none")
     with stage("writing realisations.json and realisations.png"):
         png = _plot_realisations(study, out / "realisations.png")
         summary["files"] = {"png": str(png)}

@@ -1,5 +1,7 @@
-"""Reports: the seed-paper table, and measured profiles against simulated ones."""
+"""Reports: the seed-paper table, measured profiles against simulated ones, and the
+roughness of an NC-program run."""
 
+from ._nc import analyse_nc, centre_profile
 from ._paper import GROUPS, Row, paper_table, row_group
 from ._profile_compare import ProfileComparison, compare_profiles
 
@@ -10,4 +12,6 @@ __all__ = [
     "row_group",
     "ProfileComparison",
     "compare_profiles",
+    "analyse_nc",
+    "centre_profile",
 ]

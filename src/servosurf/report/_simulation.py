@@ -245,6 +245,10 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
     out: dict[str, Any] = {
         "analysed_map": "measured" if surface is result.measured else "model"
     }
+    if result.spec.kind == "nc":
+        from ._nc import analyse_nc
+
+        return analyse_nc(result, use_measured=use_measured)
     out.update(_deviation_stats(result))
     if result.spec.kind == "lenslet":
         return _lenslet(surface, result, out)

@@ -1,5 +1,6 @@
 """Mechatronic model of the FTS: plant (Eqs 1-7), PIDF, tuning, closed loop."""
 
+from ._axis import AXIS_MODELS, AxisModel
 from ._ident import (
     DEFAULT_IDENT_PARAMS,
     Identification,
@@ -33,6 +34,8 @@ from ._perturb import (
 from ._plant import Plant, paper_eq_frf, plant_from_machine
 
 __all__ = [
+    "AxisModel",
+    "AXIS_MODELS",
     "Actuator",
     "Controller",
     "Disturbances",

@@ -26,6 +26,7 @@ from typing import Literal
 
 from ..config import describe, from_mapping, load_toml, param, to_mapping
 from ..errors import ConfigError
+from ._axis import AxisModel
 
 __all__ = [
     "Mechanics",
@@ -362,6 +363,8 @@ class Machine:
     alternative_disturbances: tuple[Disturbances, ...] = param(
         default_factory=tuple, doc="other named calibrations of the disturbances"
     )
+    # tool Z axis: the FTS loop above (default), a second-order axis or none
+    axis: AxisModel = param(default_factory=AxisModel)
     path: str = param("", doc="file this machine was read from (set by the loader)")
 
     def with_moving_mass(self, mass: float) -> Machine:
@@ -501,13 +504,17 @@ def load_machine(source: str | Path | None = None) -> Machine:
             )
     data = load_toml(path)
     parent = data.pop("inherit", None)
-    if parent is not None:
-        if not isinstance(parent, str) or parent not in builtins:
+    seen: set[str] = set()
+    while parent is not None:  # a built-in may inherit another one
+        if not isinstance(parent, str) or parent not in builtins or parent in seen:
             raise ConfigError(
                 f"{path}: inherit must name a built-in machine "
                 f"({', '.join(builtins)}), got {parent!r}"
             )
-        data = _merge(load_toml(builtins[parent]), data)
+        seen.add(parent)
+        base = load_toml(builtins[parent])
+        parent = base.pop("inherit", None)
+        data = _merge(base, data)
     try:
         machine = from_mapping(Machine, data)
     except ConfigError as exc:

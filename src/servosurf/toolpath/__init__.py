@@ -1,9 +1,10 @@
 """Toolpaths, the round-nose tool, sampling and the swept-arc surface.
 
-Flow: :func:`load_toolpath` (TOML) -> :func:`sample` (controller-rate samples, whole
-or only the windows that cut a field) -> deviations added to ``path.z`` by the servo,
-force and vibration stages -> :func:`sweep` (lower envelope of the tool arc) ->
-:class:`~servosurf.metrology.Surface`.
+Flow: :func:`load_toolpath` (TOML; or :func:`nc_spec` for an NC program read by
+:func:`read_nc_program` into a :class:`BlockPath`) -> :func:`sample`
+(controller-rate samples, whole or only the windows that cut a field) -> deviations
+added to ``path.z`` by the servo, force and vibration stages -> :func:`sweep` (lower
+envelope of the tool arc) -> :class:`~servosurf.metrology.Surface`.
 
 A measured tool edge (:func:`read_tool_edge`) gives the :class:`Tool` its nose
 radius and edge deviation.
@@ -23,6 +24,7 @@ from ._edge import (
     read_tool_edge,
     tool_table_from_trace,
 )
+from ._nc import NC_FORMATS, NCProgram, read_nc_program
 from ._paths import (
     FacingToolpath,
     LensletToolpath,
@@ -36,6 +38,15 @@ from ._paths import (
 from ._sample import FS_DEFAULT, SampledPath, count_samples, field_reach, sample
 from ._sweep import check_clearance, sweep
 from ._tool import Field, Tool, ToolpathWarning, read_waviness_csv
+from ._trajectory import (
+    BAND_PITCH,
+    BlockPath,
+    NCSettings,
+    apply_overrides,
+    band_field,
+    nc_spec,
+    nc_spec_from_mapping,
+)
 
 __all__ = [
     "FacingToolpath",
@@ -64,4 +75,14 @@ __all__ = [
     "lenslet_chord",
     "lenslet_cut_fraction",
     "lenslet_surface_speed",
+    "NCProgram",
+    "NC_FORMATS",
+    "read_nc_program",
+    "BlockPath",
+    "NCSettings",
+    "BAND_PITCH",
+    "band_field",
+    "nc_spec",
+    "nc_spec_from_mapping",
+    "apply_overrides",
 ]

@@ -425,10 +425,10 @@ class ToolpathSpec:
 
     Parameters
     ----------
-    kind : {"facing", "lenslet"}
+    kind : {"facing", "lenslet", "nc"}
         Which toolpath.
-    path : FacingToolpath or LensletToolpath
-        The path definition.
+    path : FacingToolpath, LensletToolpath or BlockPath
+        The path definition (``"nc"``: an NC program's cutting blocks).
     tool : Tool
         The diamond tool.
     field : Field
@@ -437,16 +437,17 @@ class ToolpathSpec:
         Free text.
     """
 
-    kind: Literal["facing", "lenslet"]
-    path: FacingToolpath | LensletToolpath
+    kind: Literal["facing", "lenslet", "nc"]
+    path: Any
     tool: Tool = _dc_field(default_factory=Tool)
     field: Field = _dc_field(default_factory=Field)
     description: str = ""
 
     def __post_init__(self) -> None:
-        expected = {"facing": FacingToolpath, "lenslet": LensletToolpath}.get(self.kind)
+        expected = _path_types().get(self.kind)
         if expected is None:
-            raise ConfigError(f"kind must be 'facing' or 'lenslet', got {self.kind!r}")
+            raise ConfigError(
+                f"kind must be 'facing', 'lenslet' or 'nc', got {self.kind!r}")
         if not isinstance(self.path, expected):
             raise ConfigError(
                 f"kind {self.kind!r} needs a {expected.__name__}, got "
@@ -455,6 +456,13 @@ class ToolpathSpec:
 
 
 _PATH_TYPES: dict[str, type] = {"facing": FacingToolpath, "lenslet": LensletToolpath}
+
+
+def _path_types() -> dict[str, type]:
+    """Path class of every toolpath kind (``nc`` imported on first use)."""
+    from ._trajectory import BlockPath
+
+    return {**_PATH_TYPES, "nc": BlockPath}
 _ROOT_KEYS = ("kind", "description", "facing", "lenslet", "tool", "field")
 _DEG_KEYS = ("rake-angle", "clearance-angle", "arc-half-angle")
 
@@ -472,7 +480,10 @@ def _pop_alias(table: dict[str, Any], key: str, alias: str, scale: float,
 
 
 def toolpath_from_mapping(data: Mapping[str, Any], *,
-                          base_dir: str | Path | None = None) -> ToolpathSpec:
+                          base_dir: str | Path | None = None,
+                          nose_radius: float | None = None,
+                          nc_overrides: Mapping[str, Any] | None = None
+                          ) -> ToolpathSpec:
     """Build a :class:`ToolpathSpec` from a parsed TOML mapping.
 
     Parameters
@@ -486,7 +497,13 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
         arc and waviness (see :func:`~servosurf.toolpath.tool_table_from_trace`
         for its ``edge-*`` keys, e.g. ``edge-compensated = true``).
     base_dir : str or Path, optional
-        Directory against which a relative ``edge-waviness`` path is resolved.
+        Directory against which a relative ``edge-waviness`` path (and an NC
+        program) is resolved.
+    nose_radius : float, optional
+        Tool nose radius in m replacing the file's (``--tool-radius``).
+    nc_overrides : Mapping, optional
+        Kind ``"nc"``: :class:`~servosurf.toolpath.NCSettings` fields replacing the
+        file's (see :func:`~servosurf.toolpath.nc_spec_from_mapping`).
 
     Returns
     -------
@@ -498,6 +515,13 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
     ConfigError
         On unknown keys (with suggestions), a missing or wrong ``kind``, bad values.
     """
+    kind = data.get("kind")
+    if kind == "nc":
+        from ._trajectory import nc_spec_from_mapping
+
+        return nc_spec_from_mapping(
+            data, base_dir=base_dir, overrides=nc_overrides, nose_radius=nose_radius,
+            tool_from_table=lambda tab: _tool_from_table(tab, base_dir))
     for key in data:
         if key not in _ROOT_KEYS:
             sugg = difflib.get_close_matches(str(key), _ROOT_KEYS, n=1)
@@ -505,17 +529,32 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
             raise ConfigError(
                 f"unknown key {key!r}.{hint} Allowed keys here: {', '.join(_ROOT_KEYS)}"
             )
-    kind = data.get("kind")
     if kind not in _PATH_TYPES:
-        raise ConfigError(f"kind must be 'facing' or 'lenslet', got {kind!r}")
+        raise ConfigError(
+            f"kind must be 'facing', 'lenslet' or 'nc', got {kind!r}")
     other = "lenslet" if kind == "facing" else "facing"
     if other in data:
         raise ConfigError(f"[{other}] table given but kind = {kind!r}")
     path_tab = dict(data.get(kind, {}))
     if kind == "facing":
         _pop_alias(path_tab, "spindle-speed", "spindle-speed-rpm", 1.0 / 60.0, kind)
-    tool_tab, _ = tool_table_from_trace(dict(data.get("tool", {})),
-                                        base_dir=base_dir)
+    tool_tab = dict(data.get("tool", {}))
+    if nose_radius is not None:
+        tool_tab.pop("nose_radius", None)
+        tool_tab["nose-radius"] = float(nose_radius)
+    path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
+    tool = _tool_from_table(tool_tab, base_dir)
+    fld = from_mapping(Field, dict(data.get("field", {})), prefix="field")
+    desc = data.get("description", "")
+    if not isinstance(desc, str):
+        raise ConfigError(f"description: expected str, got {type(desc).__name__}")
+    return ToolpathSpec(kind=kind, path=path, tool=tool, field=fld, description=desc)
+
+
+def _tool_from_table(tool_tab: dict[str, Any], base_dir: str | Path | None) -> Tool:
+    """The :class:`Tool` of a ``[tool]`` table, with the degree, CSV and measured
+    edge-trace aliases."""
+    tool_tab, _ = tool_table_from_trace(dict(tool_tab), base_dir=base_dir)
     for key in _DEG_KEYS:
         _pop_alias(tool_tab, key, key + "-deg", math.pi / 180.0, "tool")
     if "waviness-angle-deg" in tool_tab:
@@ -540,23 +579,22 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
         ang, dev = read_waviness_csv(p)
         tool_tab["waviness-angle"] = list(ang)
         tool_tab["waviness-deviation"] = list(dev)
-    path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
-    tool = from_mapping(Tool, tool_tab, prefix="tool")
-    fld = from_mapping(Field, dict(data.get("field", {})), prefix="field")
-    desc = data.get("description", "")
-    if not isinstance(desc, str):
-        raise ConfigError(f"description: expected str, got {type(desc).__name__}")
-    return ToolpathSpec(kind=kind, path=path, tool=tool, field=fld, description=desc)
+    return from_mapping(Tool, tool_tab, prefix="tool")
 
 
-def load_toolpath(path: str | Path) -> ToolpathSpec:
+def load_toolpath(path: str | Path, *, nose_radius: float | None = None,
+                  nc_overrides: Mapping[str, Any] | None = None) -> ToolpathSpec:
     """Read a toolpath TOML file (``toolpaths/*.toml``).
 
     Parameters
     ----------
     path : str or Path
-        The TOML file: ``kind = "facing" | "lenslet"``, a ``[facing]`` or
-        ``[lenslet]`` table, ``[tool]`` and ``[field]``.
+        The TOML file: ``kind = "facing" | "lenslet" | "nc"``, a ``[facing]``,
+        ``[lenslet]`` or ``[nc]`` table, ``[tool]`` and ``[field]``.
+    nose_radius : float, optional
+        Tool nose radius in m replacing the file's.
+    nc_overrides : Mapping, optional
+        Kind ``"nc"``: settings replacing the file's ``[nc]`` values.
 
     Returns
     -------
@@ -569,4 +607,5 @@ def load_toolpath(path: str | Path) -> ToolpathSpec:
         If the file is missing, not TOML, or has unknown keys or bad values.
     """
     p = Path(path)
-    return toolpath_from_mapping(load_toml(p), base_dir=p.parent)
+    return toolpath_from_mapping(load_toml(p), base_dir=p.parent,
+                                 nose_radius=nose_radius, nc_overrides=nc_overrides)

@@ -16,6 +16,9 @@ _LAZY = {
     "plot_spectrum": "._surface_plots", "plot_filtered_map": "._surface_plots",
     "render_surface": "._render", "RenderFallbackWarning": "._render",
     "surface_to_mesh": "._mesh", "write_mesh": "._mesh",
+    "plot_nc_toolpath": "._nc_plots", "plot_band_map": "._nc_plots",
+    "plot_centre_profile": "._nc_plots", "plot_roughness_table": "._nc_plots",
+    "nc_figures": "._nc_plots",
 }
 
 __all__ = sorted(_LAZY)
