@@ -117,7 +117,7 @@ def _reach(spec, tool) -> float:
     """Radial reach (m) of the tool arc below the pre-cut face."""
     from .toolpath import field_reach
 
-    return field_reach(tool, spec.path.depth_of_cut)  # + 1 um margin for deviations
+    return field_reach(tool, spec.path.max_depth)  # + 1 um margin for deviations
 
 
 def _span(spec, tool) -> tuple[float, float]:
@@ -131,6 +131,22 @@ def _span(spec, tool) -> tuple[float, float]:
             "move [field] center-x/center-y onto the path"
         )
     return span
+
+
+def _design_force(path, tool, kt: float, t: np.ndarray) -> np.ndarray:
+    """Thrust force (N) of a design-surface finishing pass at times ``t`` (s).
+
+    The pre-form is taken to follow the design ``path.depth_of_cut`` higher, so the
+    chip is the steady facing chip at the local feed per revolution (planned feeds
+    vary with radius), ramped in over the record's first revolution.
+    """
+    feed = path.feed_at(t)
+    levels = np.unique(feed)
+    if levels.size > 64:
+        levels = np.linspace(levels[0], levels[-1], 64)
+    area = [facing_chip_area(tool.nose_radius, f, path.depth_of_cut) for f in levels]
+    ramp = np.clip((t - t[0]) * path.rev_per_s, 0.0, 1.0)
+    return kt * np.interp(feed, levels, area) * ramp
 
 
 def simulate(
@@ -243,6 +259,10 @@ def simulate(
                     reference=ref,
                     chip=ChipModel(kt, tool.nose_radius, top),
                     chip_offset=offset,
+                )
+            elif spec.kind == "surface":  # finishing pass: facing chip, local feed
+                cut = loop.simulate(
+                    reference=ref, force=_design_force(spec.path, tool, kt, t)
                 )
             else:  # facing: steady feed-limited chip, ramped in over one revolution
                 p = spec.path

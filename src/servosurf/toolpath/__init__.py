@@ -1,5 +1,9 @@
 """Toolpaths, the round-nose tool, sampling and the swept-arc surface.
 
+Toolpath kinds: spiral facing, sinusoidal lenslet rings and design surfaces
+(sphere, conic/asphere, biconic, XY polynomial, sinusoidal grid, micro-lens arrays)
+cut by a nose-compensated spiral (:class:`DesignToolpath`).
+
 Flow: :func:`load_toolpath` (TOML) -> :func:`sample` (controller-rate samples, whole
 or only the windows that cut a field) -> deviations added to ``path.z`` by the servo,
 force and vibration stages -> :func:`sweep` (lower envelope of the tool arc) ->
@@ -11,6 +15,20 @@ aliases ``spindle-speed-rpm`` and ``<angle>-deg``.
 
 from __future__ import annotations
 
+from ._design import (
+    DESIGN_TYPES,
+    Biconic,
+    DesignSurface,
+    DesignToolpath,
+    EvenAsphere,
+    LensletArray,
+    SinusoidalGrid,
+    Sphere,
+    XYPolynomial,
+    design_from_mapping,
+    design_toolpath_from_mapping,
+    nose_compensated_tip,
+)
 from ._paths import (
     FacingToolpath,
     LensletToolpath,
@@ -45,4 +63,16 @@ __all__ = [
     "lenslet_chord",
     "lenslet_cut_fraction",
     "lenslet_surface_speed",
+    "DesignSurface",
+    "Sphere",
+    "EvenAsphere",
+    "Biconic",
+    "XYPolynomial",
+    "SinusoidalGrid",
+    "LensletArray",
+    "DESIGN_TYPES",
+    "DesignToolpath",
+    "design_from_mapping",
+    "design_toolpath_from_mapping",
+    "nose_compensated_tip",
 ]

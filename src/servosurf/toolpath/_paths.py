@@ -17,13 +17,16 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from dataclasses import field as _dc_field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from ..config import from_mapping, load_toml, param
 from ..errors import ConfigError
 from ._tool import Field, Tool, read_waviness_csv
+
+if TYPE_CHECKING:
+    from ._design import DesignToolpath
 
 __all__ = [
     "FacingToolpath",
@@ -424,9 +427,9 @@ class ToolpathSpec:
 
     Parameters
     ----------
-    kind : {"facing", "lenslet"}
+    kind : {"facing", "lenslet", "surface"}
         Which toolpath.
-    path : FacingToolpath or LensletToolpath
+    path : FacingToolpath, LensletToolpath or DesignToolpath
         The path definition.
     tool : Tool
         The diamond tool.
@@ -436,16 +439,20 @@ class ToolpathSpec:
         Free text.
     """
 
-    kind: Literal["facing", "lenslet"]
-    path: FacingToolpath | LensletToolpath
+    kind: Literal["facing", "lenslet", "surface"]
+    path: FacingToolpath | LensletToolpath | DesignToolpath
     tool: Tool = _dc_field(default_factory=Tool)
     field: Field = _dc_field(default_factory=Field)
     description: str = ""
 
     def __post_init__(self) -> None:
-        expected = {"facing": FacingToolpath, "lenslet": LensletToolpath}.get(self.kind)
+        from ._design import DesignToolpath
+
+        expected = {"facing": FacingToolpath, "lenslet": LensletToolpath,
+                    "surface": DesignToolpath}.get(self.kind)
         if expected is None:
-            raise ConfigError(f"kind must be 'facing' or 'lenslet', got {self.kind!r}")
+            raise ConfigError(
+                f"kind must be 'facing', 'lenslet' or 'surface', got {self.kind!r}")
         if not isinstance(self.path, expected):
             raise ConfigError(
                 f"kind {self.kind!r} needs a {expected.__name__}, got "
@@ -454,7 +461,11 @@ class ToolpathSpec:
 
 
 _PATH_TYPES: dict[str, type] = {"facing": FacingToolpath, "lenslet": LensletToolpath}
-_ROOT_KEYS = ("kind", "description", "facing", "lenslet", "tool", "field")
+#: The tables each kind reads (a table of another kind is an error).
+_KIND_TABLES = {"facing": ("facing",), "lenslet": ("lenslet",),
+                "surface": ("surface", "spiral")}
+_ROOT_KEYS = ("kind", "description", "facing", "lenslet", "surface", "spiral", "tool",
+              "field")
 _DEG_KEYS = ("rake-angle", "clearance-angle", "arc-half-angle")
 
 
@@ -502,11 +513,13 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
                 f"unknown key {key!r}.{hint} Allowed keys here: {', '.join(_ROOT_KEYS)}"
             )
     kind = data.get("kind")
-    if kind not in _PATH_TYPES:
-        raise ConfigError(f"kind must be 'facing' or 'lenslet', got {kind!r}")
-    other = "lenslet" if kind == "facing" else "facing"
-    if other in data:
-        raise ConfigError(f"[{other}] table given but kind = {kind!r}")
+    if kind not in _KIND_TABLES:
+        raise ConfigError(
+            f"kind must be 'facing', 'lenslet' or 'surface', got {kind!r}")
+    for other, tables in _KIND_TABLES.items():
+        for t in tables:
+            if other != kind and t not in _KIND_TABLES[kind] and t in data:
+                raise ConfigError(f"[{t}] table given but kind = {kind!r}")
     path_tab = dict(data.get(kind, {}))
     if kind == "facing":
         _pop_alias(path_tab, "spindle-speed", "spindle-speed-rpm", 1.0 / 60.0, kind)
@@ -535,8 +548,14 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
         ang, dev = read_waviness_csv(p)
         tool_tab["waviness-angle"] = list(ang)
         tool_tab["waviness-deviation"] = list(dev)
-    path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
     tool = from_mapping(Tool, tool_tab, prefix="tool")
+    if kind == "surface":
+        from ._design import design_toolpath_from_mapping
+
+        path = design_toolpath_from_mapping(data.get("surface", {}),
+                                            data.get("spiral", {}), tool)
+    else:
+        path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
     fld = from_mapping(Field, dict(data.get("field", {})), prefix="field")
     desc = data.get("description", "")
     if not isinstance(desc, str):
@@ -550,8 +569,10 @@ def load_toolpath(path: str | Path) -> ToolpathSpec:
     Parameters
     ----------
     path : str or Path
-        The TOML file: ``kind = "facing" | "lenslet"``, a ``[facing]`` or
-        ``[lenslet]`` table, ``[tool]`` and ``[field]``.
+        The TOML file: ``kind = "facing" | "lenslet" | "surface"``, a ``[facing]``
+        or ``[lenslet]`` table or the ``[surface]`` and ``[spiral]`` tables of a
+        design surface (:func:`~servosurf.toolpath.design_toolpath_from_mapping`),
+        ``[tool]`` and ``[field]``.
 
     Returns
     -------

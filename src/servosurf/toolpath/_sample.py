@@ -203,13 +203,15 @@ def _ranges_to_index(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
 
 
 def _resolve(spec, tool):
+    from ._design import DesignToolpath
+
     if isinstance(spec, ToolpathSpec):
         return spec.path, (spec.tool if tool is None else tool)
-    if isinstance(spec, FacingToolpath | LensletToolpath):
+    if isinstance(spec, FacingToolpath | LensletToolpath | DesignToolpath):
         return spec, tool
     raise ConfigError(
-        f"spec must be a ToolpathSpec, FacingToolpath or LensletToolpath, got "
-        f"{type(spec).__name__}"
+        f"spec must be a ToolpathSpec, FacingToolpath, LensletToolpath or "
+        f"DesignToolpath, got {type(spec).__name__}"
     )
 
 
