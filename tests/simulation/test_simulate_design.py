@@ -43,6 +43,27 @@ def test_kinematic_simulation_is_the_sweep_and_meets_the_scallop(small_sphere):
     assert summary["design"]["design"] == {"type": "sphere", "radius_m": -0.05}
 
 
+def test_kinematic_simulation_on_a_steep_sphere(small_sphere):
+    """At a slope of 19 degrees the nose touches the sphere R sin(phi) = 0.16 mm
+    inboard of the tip, far beyond the arc's reach at the finishing depth: the
+    simulated span must follow the tip's whole depth below the pre-cut face."""
+    from servosurf.toolpath import DesignToolpath, Field, Sphere
+
+    p = DesignToolpath(design=Sphere(radius=-5e-3), r_start=2.2e-3, r_end=1.0e-3,
+                       spindle_speed=20.0, feed_per_rev=20e-6, depth_of_cut=3e-6)
+    fld = Field(pitch_x=1e-6, pitch_y=1e-6, nx=48, ny=32, center_x=1.6e-3)
+    spec = dataclasses.replace(small_sphere, path=p, field=fld)
+    res = simulate(spec, parts=())
+    ref = sweep(sample(spec, field=fld, tool=spec.tool), spec.tool, fld)
+    np.testing.assert_allclose(res.surface.z, ref.z, atol=1e-15)  # 1 fm
+    x, y = fld.coords()
+    err = res.surface.z - p.design_height(x[None, :], y[:, None])
+    # scallop f^2 / (8 R (1 + R / 5 mm) cos(phi)^3), sin(phi) = r / 5.5 mm
+    rmax = np.hypot(x[-1], y[-1])
+    h = 20e-6**2 / (8 * 0.5e-3 * 1.1 * (1 - (rmax / 5.5e-3) ** 2) ** 1.5)
+    assert err.min() >= -1e-12 and err.max() <= h * 1.01
+
+
 def test_force_is_the_steady_facing_chip(small_sphere):
     """Constant feed f, finishing depth d: the chip section is f (d - f^2 / (24 R))
     (the volume cut per revolution: f times the depth below the mean of the

@@ -46,8 +46,11 @@ in that plane.
 
 Two solvers: ``MODE_UNIQUE`` brackets the root of F' on [-w, w] with Brent's method
 (valid when F is concave there, which holds when S'' < 1 / R along the section);
-``MODE_SCAN`` evaluates F on a grid over [-w, w] and refines the two best local
-maxima by golden-section search (any section, including concave corners).
+``MODE_SCAN`` evaluates F on a grid over [-w, w] and refines by golden-section
+search every grid cell where F could exceed the best grid value: where the cell's
+mean design height plus twice the largest design slope between grid points times
+half a cell, minus the arc's lowest height in the cell, is above it (any section,
+including concave corners).
 ``MODE_NONE`` puts the tip on the design (no compensation).
 """
 
@@ -376,42 +379,38 @@ def _tip(code, p, r, theta, cx, cy, R, w, mode, nscan):  # pragma: no cover - nu
             else:
                 u = _brent(code, p, r, ct, st, cx, cy, R, -w, w, fa, fb, tol)
         return _objective(code, p, r, ct, st, cx, cy, R, u), u
-    # MODE_SCAN: grid, then refine the two best local maxima
+    # MODE_SCAN: grid, then refine every cell whose bound could beat the best
     du = 2.0 * w / nscan
-    best1 = -np.inf
-    best2 = -np.inf
-    i1 = -1
-    i2 = -1
-    f_prev = -np.inf
-    f_cur = _objective(code, p, r, ct, st, cx, cy, R, -w)
+    sv = np.empty(nscan + 1)  # S(r + u_i) - the design on the grid, -inf undefined
+    best = -np.inf
+    u_best = 0.0
+    lip = 0.0
     for i in range(nscan + 1):
-        if i < nscan:
-            f_next = _objective(code, p, r, ct, st, cx, cy, R, -w + (i + 1) * du)
-        else:
-            f_next = -np.inf
-        if f_cur >= f_prev and f_cur >= f_next and f_cur > -np.inf:
-            if f_cur > best1:
-                best2, i2 = best1, i1
-                best1, i1 = f_cur, i
-            elif f_cur > best2:
-                best2, i2 = f_cur, i
-        f_prev = f_cur
-        f_cur = f_next
-    if i1 < 0:
-        return np.nan, 0.0
-    u_best = -w + i1 * du
-    f_best = best1
-    for k in range(2):
-        i = i1 if k == 0 else i2
-        if i < 0:
-            continue
-        a = max(-w, -w + (i - 1) * du)
-        b = min(w, -w + (i + 1) * du)
-        u, f = _golden(code, p, r, ct, st, cx, cy, R, a, b, tol)
-        if f > f_best:
-            f_best = f
+        u = -w + i * du
+        fi = _objective(code, p, r, ct, st, cx, cy, R, u)
+        sv[i] = fi + _arc(R, u)
+        if fi > best:
+            best = fi
             u_best = u
-    return f_best, u_best
+        if i > 0 and sv[i] > -np.inf and sv[i - 1] > -np.inf:
+            lip = max(lip, abs(sv[i] - sv[i - 1]) / du)
+    if not best > -np.inf:
+        return np.nan, 0.0
+    lip *= 2.0  # the design's slope between grid points, with a safety factor
+    for i in range(nscan):
+        if not (sv[i] > -np.inf and sv[i + 1] > -np.inf):
+            continue
+        a = -w + i * du
+        b = a + du
+        near = 0.0 if a <= 0.0 <= b else min(abs(a), abs(b))
+        bound = 0.5 * (sv[i] + sv[i + 1] + lip * du) - _arc(R, near)
+        if bound <= best:
+            continue
+        u, fu = _golden(code, p, r, ct, st, cx, cy, R, a, b, tol)
+        if fu > best:
+            best = fu
+            u_best = u
+    return best, u_best
 
 
 @njit(parallel=True, cache=CACHE, fastmath=FASTMATH)
