@@ -718,10 +718,10 @@ def nose_compensated_tip(design: DesignSurface, r, theta, *, nose_radius: float,
     center : tuple of float, default: (0.0, 0.0)
         Position of the design's origin in the workpiece frame, in m.
     solver : {"scan", "brent"}, default: "scan"
-        ``"scan"``: grid over the arc and golden-section refinement of the local
-        maxima the grid's sampling error could make the best (any design). ``"brent"``: root of the stationarity condition
-        S'(r + u) = tan(phi), valid when the section's second derivative stays
-        below 1 / R (a single contact).
+        ``"scan"``: grid over the arc and golden-section refinement of every grid
+        cell where the maximum could lie (any design). ``"brent"``: root of the
+        stationarity condition S'(r + u) = tan(phi), valid when the section's
+        second derivative stays below 1 / R (a single contact).
 
     Returns
     -------
