@@ -11,7 +11,8 @@
      overshoot);
    * ``force``: the thrust force ``k_t A(z)`` from the uncut chip section, computed
      each sample from the actual, deviated tool position, through the loop (the
-     difference of two loop runs with and without cutting);
+     difference of two loop runs with and without cutting); for facing and design
+     surfaces the steady facing chip at the (local) feed per revolution;
    * ``vibration``: a seeded realisation of the real positioning error spectrum
      (sensor noise, current noise and base vibration through the closed loop,
      including the structural modes).

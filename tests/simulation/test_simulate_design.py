@@ -40,7 +40,8 @@ def test_kinematic_simulation_is_the_sweep_and_meets_the_scallop(small_sphere):
     assert summary["form_error_rms_m"] < summary["form_error_pv_m"] / 2
     # one more fitted term cannot raise the RMS (it may raise the PV)
     assert summary["form_error_rms_bfs_m"] <= summary["form_error_rms_m"] * (1 + 1e-9)
-    assert summary["design"]["design"] == {"type": "sphere", "radius_m": -0.05}
+    assert summary["design_toolpath"]["design"] == {"type": "sphere",
+                                                     "radius_m": -0.05}
 
 
 def test_kinematic_simulation_on_a_steep_sphere(small_sphere):
@@ -103,7 +104,8 @@ def test_simulate_cli_reports_the_form_error(tmp_path, capsys):
     assert data["settings"]["toolpath_kind"] == "surface"
     assert data["form_error_pv_m"] >= data["kinematic_scallop_m"] * 0.9
     assert data["files"]["form_error_png"].endswith("form_error.png")
-    for name in ("form_error.png", "map.png", "summary.json", "surface.npz"):
+    for name in ("form_error.png", "toolpath.png", "map.png", "summary.json",
+                 "surface.npz"):
         assert (out / name).stat().st_size > 0
     # without --json: one line with PV and RMS in nm
     rc = main(["simulate", str(toml), "--out", str(out), "--no-render", "--format",

@@ -158,11 +158,15 @@ def run(args) -> int:
             )
         )
         if "form_error" in plots:  # design surface: error map against the design
-            from ..viz._form_plots import plot_form_error
+            from ..viz._form_plots import plot_design_feed, plot_form_error
 
             files["form_error_png"] = str(plot_form_error(
                 plots["form_error"], out / "form_error.png",
                 title=f"{tp.stem}: form error against the design"))
+            fld = res.spec.field
+            files["toolpath_png"] = str(plot_design_feed(
+                res.spec.path, out / "toolpath.png",
+                theta=float(np.arctan2(fld.center_y, fld.center_x))))
         freq, psd, peaks = plots["spectrum"]
         speed = summary.get("surface_speed_m_per_s")
         files["spectrum_png"] = str(

@@ -241,7 +241,7 @@ def _design(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         "piston and tilt; bfs: also after the best-fit sphere",
         kinematic_scallop_m=(float(np.nanmax(scallop)) if np.isfinite(scallop).any()
                              else None),
-        design=path.to_dict(),
+        design_toolpath=path.to_dict(),
         roughness_definition="of the form-error map (map minus design, after piston "
         "and tilt), unfiltered about its least-squares plane; Ra mean over radial rows "
         "after a line fit",

@@ -853,6 +853,9 @@ class DesignToolpath(_ConstantSpeedPath):
 
     Notes
     -----
+    Where the spiral ends on the axis (r_end = 0) the last, partial revolution
+    leaves a few pixels within about one feed of the axis above the scallop height.
+
     Solver: the band r_end - w .. r_start + w (w = R sin(phi_max)) is sampled on a
     polar grid; when the section's second derivative stays below ``0.98 / R`` there
     the contact is unique and found with Brent's method on ``S' = tan(phi)``,
