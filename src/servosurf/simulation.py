@@ -11,7 +11,8 @@
      overshoot);
    * ``force``: the thrust force ``k_t A(z)`` from the uncut chip section, computed
      each sample from the actual, deviated tool position, through the loop (the
-     difference of two loop runs with and without cutting);
+     difference of two loop runs with and without cutting); for facing and design
+     surfaces the steady facing chip at the (local) feed per revolution;
    * ``vibration``: a seeded realisation of the real positioning error spectrum
      (sensor noise, current noise and base vibration through the closed loop,
      including the structural modes).
@@ -123,8 +124,9 @@ def _reach(spec, tool) -> float:
     paths without a depth of cut, such as NC programs)."""
     from .toolpath import field_reach
 
-    # + 1 um margin for deviations
-    return field_reach(tool, getattr(spec.path, "depth_of_cut", None))
+    # + 1 um margin for deviations (a design path's deepest point may be far
+    # below its datum)
+    return field_reach(tool, getattr(spec.path, "max_depth", None))
 
 
 def _span(spec, tool) -> tuple[float, float]:
@@ -169,6 +171,22 @@ def _physical(spec, surface):
     if np.isinf(z).any():
         surface = surface.replace(z=np.where(np.isinf(z), np.nan, z))
     return surface
+
+
+def _design_force(path, tool, kt: float, t: np.ndarray) -> np.ndarray:
+    """Thrust force (N) of a design-surface finishing pass at times ``t`` (s).
+
+    The pre-form is taken to follow the design ``path.depth_of_cut`` higher, so the
+    chip is the steady facing chip at the local feed per revolution (planned feeds
+    vary with radius), ramped in over the record's first revolution.
+    """
+    feed = path.feed_at(t)
+    levels = np.unique(feed)
+    if levels.size > 64:
+        levels = np.linspace(levels[0], levels[-1], 64)
+    area = [facing_chip_area(tool.nose_radius, f, path.depth_of_cut) for f in levels]
+    ramp = np.clip((t - t[0]) * path.rev_per_s, 0.0, 1.0)
+    return kt * np.interp(feed, levels, area) * ramp
 
 
 def simulate(
@@ -308,6 +326,10 @@ def simulate(
                     reference=ref,
                     chip=ChipModel(kt, tool.nose_radius, top),
                     chip_offset=offset,
+                )
+            elif spec.kind == "surface":  # finishing pass: facing chip, local feed
+                cut = loop.simulate(
+                    reference=ref, force=_design_force(spec.path, tool, kt, t)
                 )
             else:  # facing: steady feed-limited chip, ramped in over one revolution
                 p = spec.path

@@ -292,6 +292,16 @@ def run(args) -> int:
                 + (" of the form error" if "profile" in plots else ""),
             )
         )
+        if "form_error" in plots:  # design surface: error map against the design
+            from ..viz._form_plots import plot_design_feed, plot_form_error
+
+            files["form_error_png"] = str(plot_form_error(
+                plots["form_error"], out / "form_error.png",
+                title=f"{tp.stem}: form error against the design"))
+            fld = res.spec.field
+            files["toolpath_png"] = str(plot_design_feed(
+                res.spec.path, out / "toolpath.png",
+                theta=float(np.arctan2(fld.center_y, fld.center_x))))
         freq, psd, peaks = plots["spectrum"]
         speed = summary.get("surface_speed_m_per_s")
         files["spectrum_png"] = str(
@@ -337,6 +347,14 @@ def run(args) -> int:
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
+    elif "form_error_pv_m" in summary:
+        nm = {k: summary[k] * 1e9 for k in ("form_error_pv_m", "form_error_rms_m",
+                                            "form_error_pv_bfs_m",
+                                            "form_error_rms_bfs_m")}
+        print(f"form error against the design: PV {nm['form_error_pv_m']:.2f} nm, "
+              f"RMS {nm['form_error_rms_m']:.2f} nm (after piston and tilt); after "
+              f"the best-fit sphere: PV {nm['form_error_pv_bfs_m']:.2f} nm, RMS "
+              f"{nm['form_error_rms_bfs_m']:.2f} nm")
     return 0
 
 

@@ -27,6 +27,8 @@ _LAZY = {
     # lenslet form
     "nominal_lenslet_profile": "._form", "nominal_lenslet_surface": "._form",
     "form_error_profile": "._form", "lenslet_centre_profile": "._form",
+    # form error against a design surface
+    "form_error_against_design": "._design_form", "DesignFormError": "._design_form",
     "find_deepest_point": "._lenslet", "segment_lenslets": "._lenslet",
     # registration and resampling
     "register_translation": "._register", "shift_surface": "._register",

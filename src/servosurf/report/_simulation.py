@@ -46,7 +46,8 @@ def _deviation_stats(result) -> dict[str, Any]:
     dev, force = result.deviation["force"], result.force
     fs = result.machine.controller.sample_rate
     out: dict[str, Any] = {}
-    if isinstance(result.spec.path, FacingToolpath) or not np.any(force > 0):
+    if (isinstance(result.spec.path, FacingToolpath) or result.spec.kind == "surface"
+            or not np.any(force > 0)):
         out["force_max_n"] = float(force.max()) if force.size else 0.0
         return out
     settle = int(0.05 * fs)
@@ -219,6 +220,36 @@ def _flat(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _design(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
+    """Form error against the design; roughness and spectrum of the error map."""
+    from ..metrology import form_error_against_design
+
+    path = result.spec.path
+    fe = form_error_against_design(surface, path, best_fit_sphere=True)
+    out = _flat(fe.error, result, out)
+    err = fe.error.z[np.isfinite(fe.error.z)]
+    fld = result.spec.field
+    xs = np.linspace(fld.bounds[0], fld.bounds[1], 3)
+    ys = np.linspace(fld.bounds[2], fld.bounds[3], 3)
+    gx, gy = np.meshgrid(xs, ys)
+    with np.errstate(invalid="ignore"):
+        scallop = path.predicted_scallop(np.hypot(gx, gy), np.arctan2(gy, gx))
+    out.update(fe.to_dict())
+    out.update(
+        form_error_max_m=float(np.max(np.abs(err))),
+        form_reference="design surface (toolpath [surface]) on the workpiece, after "
+        "piston and tilt; bfs: also after the best-fit sphere",
+        kinematic_scallop_m=(float(np.nanmax(scallop)) if np.isfinite(scallop).any()
+                             else None),
+        design_toolpath=path.to_dict(),
+        roughness_definition="of the form-error map (map minus design, after piston "
+        "and tilt), unfiltered about its least-squares plane; Ra mean over radial rows "
+        "after a line fit",
+    )
+    out["_plots"]["form_error"] = fe
+    return out
+
+
 def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
     """Metrology summary of a :class:`~servosurf.simulation.SimulationResult`.
 
@@ -233,6 +264,8 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
     -------
     dict
         SI values: ``form_error_max_m``, ``form_error_lag_m`` (lenslets),
+        ``form_error_pv_m``, ``form_error_rms_m`` and their ``_bfs`` variants
+        (design surfaces, against the design after piston and tilt),
         ``spectrum_peaks_per_m`` (strongest first), ``ra_m``, ``sa_m``, ``sq_m``,
         deviation statistics (``deviation_max_m``, ``deviation_overshoot_m``,
         ``deviation_lag_s``, ``force_max_n``) and ``_plots`` data (not JSON).
@@ -252,6 +285,8 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
     out.update(_deviation_stats(result))
     if result.spec.kind == "lenslet":
         return _lenslet(surface, result, out)
+    if result.spec.kind == "surface":
+        return _design(surface, result, out)
     return _flat(surface, result, out)
 
 

@@ -1,13 +1,15 @@
 """Toolpaths, the round-nose tool, sampling and the swept-arc surface.
 
-Flow: :func:`load_toolpath` (TOML; or :func:`nc_spec` for an NC program read by
-:func:`read_nc_program` into a :class:`BlockPath`) -> :func:`sample`
-(controller-rate samples, whole or only the windows that cut a field) -> deviations
-added to ``path.z`` by the servo, force and vibration stages -> :func:`sweep` (lower
-envelope of the tool arc) -> :class:`~servosurf.metrology.Surface`.
+Toolpath kinds: spiral facing, sinusoidal lenslet rings, design surfaces (sphere,
+conic/asphere, biconic, XY polynomial, sinusoidal grid, micro-lens arrays) cut by a
+nose-compensated spiral (:class:`DesignToolpath`), and NC programs
+(:func:`read_nc_program` into a :class:`BlockPath`, :func:`nc_spec`).
 
-A measured tool edge (:func:`read_tool_edge`) gives the :class:`Tool` its nose
-radius and edge deviation.
+Flow: :func:`load_toolpath` -> :func:`sample` (controller-rate samples, whole or only
+the windows that cut a field) -> deviations added to ``path.z`` by the servo, force
+and vibration stages -> :func:`sweep` (lower envelope of the tool arc) ->
+:class:`~servosurf.metrology.Surface`. A measured tool edge (:func:`read_tool_edge`)
+gives the :class:`Tool` its nose radius and edge deviation.
 
 Units are SI: m, s, rad, Hz; spindle speed in rev/s. TOML files may use the boundary
 aliases ``spindle-speed-rpm`` and ``<angle>-deg``.
@@ -15,6 +17,20 @@ aliases ``spindle-speed-rpm`` and ``<angle>-deg``.
 
 from __future__ import annotations
 
+from ._design import (
+    DESIGN_TYPES,
+    Biconic,
+    DesignSurface,
+    DesignToolpath,
+    EvenAsphere,
+    LensletArray,
+    SinusoidalGrid,
+    Sphere,
+    XYPolynomial,
+    design_from_mapping,
+    design_toolpath_from_mapping,
+    nose_compensated_tip,
+)
 from ._edge import (
     EdgeSettings,
     MeasuredEdge,
@@ -85,4 +101,16 @@ __all__ = [
     "nc_spec",
     "nc_spec_from_mapping",
     "apply_overrides",
+    "DesignSurface",
+    "Sphere",
+    "EvenAsphere",
+    "Biconic",
+    "XYPolynomial",
+    "SinusoidalGrid",
+    "LensletArray",
+    "DESIGN_TYPES",
+    "DesignToolpath",
+    "design_from_mapping",
+    "design_toolpath_from_mapping",
+    "nose_compensated_tip",
 ]

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from dataclasses import field as _dc_field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -25,6 +25,9 @@ from ..config import from_mapping, load_toml, param
 from ..errors import ConfigError
 from ._edge import tool_table_from_trace
 from ._tool import Field, Tool, read_waviness_csv
+
+if TYPE_CHECKING:
+    pass
 
 __all__ = [
     "FacingToolpath",
@@ -425,9 +428,9 @@ class ToolpathSpec:
 
     Parameters
     ----------
-    kind : {"facing", "lenslet", "nc"}
+    kind : {"facing", "lenslet", "surface", "nc"}
         Which toolpath.
-    path : FacingToolpath, LensletToolpath or BlockPath
+    path : FacingToolpath, LensletToolpath, DesignToolpath or BlockPath
         The path definition (``"nc"``: an NC program's cutting blocks).
     tool : Tool
         The diamond tool.
@@ -437,7 +440,7 @@ class ToolpathSpec:
         Free text.
     """
 
-    kind: Literal["facing", "lenslet", "nc"]
+    kind: Literal["facing", "lenslet", "surface", "nc"]
     path: Any
     tool: Tool = _dc_field(default_factory=Tool)
     field: Field = _dc_field(default_factory=Field)
@@ -447,7 +450,8 @@ class ToolpathSpec:
         expected = _path_types().get(self.kind)
         if expected is None:
             raise ConfigError(
-                f"kind must be 'facing', 'lenslet' or 'nc', got {self.kind!r}")
+                f"kind must be 'facing', 'lenslet', 'surface' or 'nc', got "
+                f"{self.kind!r}")
         if not isinstance(self.path, expected):
             raise ConfigError(
                 f"kind {self.kind!r} needs a {expected.__name__}, got "
@@ -459,11 +463,18 @@ _PATH_TYPES: dict[str, type] = {"facing": FacingToolpath, "lenslet": LensletTool
 
 
 def _path_types() -> dict[str, type]:
-    """Path class of every toolpath kind (``nc`` imported on first use)."""
+    """Path class of every toolpath kind (``surface`` and ``nc`` imported on use)."""
+    from ._design import DesignToolpath
     from ._trajectory import BlockPath
 
-    return {**_PATH_TYPES, "nc": BlockPath}
-_ROOT_KEYS = ("kind", "description", "facing", "lenslet", "tool", "field")
+    return {**_PATH_TYPES, "surface": DesignToolpath, "nc": BlockPath}
+
+
+#: The tables each kind reads (a table of another kind is an error).
+_KIND_TABLES = {"facing": ("facing",), "lenslet": ("lenslet",),
+                "surface": ("surface", "spiral")}
+_ROOT_KEYS = ("kind", "description", "facing", "lenslet", "surface", "spiral", "tool",
+              "field")
 _DEG_KEYS = ("rake-angle", "clearance-angle", "arc-half-angle")
 
 
@@ -529,12 +540,13 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
             raise ConfigError(
                 f"unknown key {key!r}.{hint} Allowed keys here: {', '.join(_ROOT_KEYS)}"
             )
-    if kind not in _PATH_TYPES:
+    if kind not in _KIND_TABLES:
         raise ConfigError(
-            f"kind must be 'facing', 'lenslet' or 'nc', got {kind!r}")
-    other = "lenslet" if kind == "facing" else "facing"
-    if other in data:
-        raise ConfigError(f"[{other}] table given but kind = {kind!r}")
+            f"kind must be 'facing', 'lenslet', 'surface' or 'nc', got {kind!r}")
+    for other, tables in _KIND_TABLES.items():
+        for t in tables:
+            if other != kind and t not in _KIND_TABLES[kind] and t in data:
+                raise ConfigError(f"[{t}] table given but kind = {kind!r}")
     path_tab = dict(data.get(kind, {}))
     if kind == "facing":
         _pop_alias(path_tab, "spindle-speed", "spindle-speed-rpm", 1.0 / 60.0, kind)
@@ -542,8 +554,14 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
     if nose_radius is not None:
         tool_tab.pop("nose_radius", None)
         tool_tab["nose-radius"] = float(nose_radius)
-    path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
     tool = _tool_from_table(tool_tab, base_dir)
+    if kind == "surface":
+        from ._design import design_toolpath_from_mapping
+
+        path = design_toolpath_from_mapping(data.get("surface", {}),
+                                            data.get("spiral", {}), tool)
+    else:
+        path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
     fld = from_mapping(Field, dict(data.get("field", {})), prefix="field")
     desc = data.get("description", "")
     if not isinstance(desc, str):
@@ -589,8 +607,11 @@ def load_toolpath(path: str | Path, *, nose_radius: float | None = None,
     Parameters
     ----------
     path : str or Path
-        The TOML file: ``kind = "facing" | "lenslet" | "nc"``, a ``[facing]``,
-        ``[lenslet]`` or ``[nc]`` table, ``[tool]`` and ``[field]``.
+        The TOML file: ``kind = "facing" | "lenslet" | "surface" | "nc"``, a
+        ``[facing]``, ``[lenslet]`` or ``[nc]`` table or the ``[surface]`` and
+        ``[spiral]`` tables of a design surface
+        (:func:`~servosurf.toolpath.design_toolpath_from_mapping`), ``[tool]`` and
+        ``[field]``.
     nose_radius : float, optional
         Tool nose radius in m replacing the file's.
     nc_overrides : Mapping, optional

@@ -204,15 +204,16 @@ def _ranges_to_index(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
 
 
 def _resolve(spec, tool):
+    from ._design import DesignToolpath
     from ._trajectory import BlockPath
 
     if isinstance(spec, ToolpathSpec):
         return spec.path, (spec.tool if tool is None else tool)
-    if isinstance(spec, FacingToolpath | LensletToolpath | BlockPath):
+    if isinstance(spec, FacingToolpath | LensletToolpath | BlockPath | DesignToolpath):
         return spec, tool
     raise ConfigError(
-        f"spec must be a ToolpathSpec, FacingToolpath, LensletToolpath or BlockPath, "
-        f"got {type(spec).__name__}"
+        f"spec must be a ToolpathSpec, FacingToolpath, LensletToolpath, BlockPath or "
+        f"DesignToolpath, got {type(spec).__name__}"
     )
 
 
