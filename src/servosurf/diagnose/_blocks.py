@@ -54,6 +54,12 @@ EDGE_MARGIN = 30e-9
 #: Cut points whose runner-up pass lies less than this many standard deviations
 #: of the two passes' tool-noise difference above the active pass are left out.
 AMBIGUITY_SIGMAS = 4.0
+#: Fewer instrument-only values (within intervals and on the uncut top) than this
+#: (or than half the interval statistics) and the instrument sigma is estimated by
+#: maximum likelihood of the statistics too.
+MIN_SIGMA_POINTS = 2000
+#: Segments (revolutions) used by that maximum-likelihood estimate.
+ML_SEGMENTS = 24
 #: At most this many uncut points of a map are used.
 MAX_UNCUT = 20000
 
@@ -887,30 +893,9 @@ class PointsBlock(Block):
             dev.append(u - np.median(u))
             n_uncut = u.size
         allv = np.concatenate(dev) if dev else np.zeros(0)
-        sig, dof_sig = None, math.inf
-        if allv.size >= 16:
-            sig, kept = _clipped_sd(allv)
-            dof_sig = (n_within + n_uncut) * kept
-        if sig is None or not np.isfinite(sig) or not sig > 0:
-            d = np.diff(r0)
-            sig, kept = _clipped_sd(d - np.median(d))
-            sig /= math.sqrt(2.0)
-            # var(sum of squared first differences) = 12 n sigma^4: 2n/3 dof
-            dof_sig = 2.0 * d.size * kept / 3.0
-            n_within = n_uncut = 0
-        if not sig > MAP_FLOOR:
-            dof_sig = math.inf  # the floor, not an estimate
-        self.sigma = max(float(sig), MAP_FLOOR)
-        #: dof of the instrument-variance estimate, and how many of them came
-        #: from the within-interval spread and from the uncut top
-        self.sigma_dof = float(dof_sig)
-        self.sigma_parts = {"within": n_within, "uncut": n_uncut}
-        # covariance of the interval statistics: tool error through their sample
-        # weights plus the instrument's sigma^2, per segment of connected time;
-        # whitening by the block-diagonal inverse Cholesky factor (sparse)
-        self.segments = []
-        self.wbins = None
-        self.instrument_share = 0.0
+        # tool-noise covariance of the interval statistics per segment of
+        # connected time (sigma^2 is added once estimated)
+        tool_cov = []
         if nb:
             rt = tool_autocov_table(self.ctx, p0)
             b_of = self.stat_bin
@@ -933,6 +918,43 @@ class PointsBlock(Block):
                     + np.outer(g1[seg], g0[seg]) * cov_at(d + 1)
                     + np.outer(g1[seg], g1[seg]) * cov_at(d)
                 )
+                tool_cov.append((seg, c))
+        n_stats_dof = 0.0
+        self.ml_rho2 = 0.0
+        sig, dof_sig = None, math.inf
+        if allv.size >= 16 and allv.size >= min(MIN_SIGMA_POINTS, 0.5 * n_stats):
+            sig, kept = _clipped_sd(allv)
+            dof_sig = (n_within + n_uncut) * kept
+        elif tool_cov:
+            # too few instrument-only values (a facing map: one or two points per
+            # interval, no uncut top): maximum likelihood of the statistics
+            # together with what there is
+            sig, dof_sig, n_stats_dof = self._sigma_ml(
+                r0, tool_cov, allv, n_within + n_uncut)
+        if sig is None or not np.isfinite(sig) or not sig > 0:
+            d = np.diff(r0)
+            sig, kept = _clipped_sd(d - np.median(d))
+            sig /= math.sqrt(2.0)
+            # var(sum of squared first differences) = 12 n sigma^4: 2n/3 dof
+            dof_sig = 2.0 * d.size * kept / 3.0
+            n_within = n_uncut = 0
+        if not sig > MAP_FLOOR:
+            dof_sig = math.inf  # the floor, not an estimate
+            n_stats_dof = 0.0
+        self.sigma = max(float(sig), MAP_FLOOR)
+        #: dof of the instrument-variance estimate, and how many of them came
+        #: from the within-interval spread, the uncut top and the statistics
+        self.sigma_dof = float(dof_sig)
+        self.sigma_parts = {"within": n_within, "uncut": n_uncut,
+                            "stats": int(round(n_stats_dof))}
+        # whitening of the statistics by the block-diagonal inverse Cholesky
+        # factor of their covariance (sparse)
+        self.segments = []
+        self.wbins = None
+        self.instrument_share = 0.0
+        if tool_cov:
+            for seg, c in tool_cov:
+                c = c.copy()
                 c[np.diag_indices_from(c)] += self.sigma**2
                 try:
                     ch = np.linalg.cholesky(c)
@@ -957,6 +979,44 @@ class PointsBlock(Block):
         q, _ = np.linalg.qr(wx)
         self.q = q
         self.dof = n - q.shape[1]
+
+    def _sigma_ml(self, r0, tool_cov, allv, n_direct):
+        """Instrument sigma (m) by maximum likelihood of the interval statistics.
+
+        ``nll(s) = sum_seg [log det(T + s^2 I) + b^T (T + s^2 I)^-1 b]
+        + sum(v^2) / s^2 + n log s^2`` over at most :data:`ML_SEGMENTS` segments
+        (eigendecomposition of each tool covariance T once), ``v`` the
+        instrument-only values. Returns the estimate, its equivalent dof (twice
+        the Fisher information of log s^2) and the part of it the statistics
+        carry.
+        """
+        st = self._stats(r0[:, None])[:, 0]
+        parts = []
+        step = max(1, len(tool_cov) // ML_SEGMENTS)
+        for seg, c in tool_cov[::step][:ML_SEGMENTS]:
+            lam, v = np.linalg.eigh(c)
+            parts.append((np.maximum(lam, 0.0), (v.T @ st[seg]) ** 2))
+        lam = np.concatenate([p_[0] for p_ in parts])
+        proj = np.concatenate([p_[1] for p_ in parts])
+        ssv = float(allv @ allv) if allv.size else 0.0
+        nv = float(allv.size)
+        scale = len(tool_cov) / max(len(parts), 1)
+
+        def nll(ls2):
+            s2 = math.exp(ls2)
+            d = lam + s2
+            return float(scale * np.sum(np.log(d) + proj / d)) + ssv / s2 + nv * ls2
+
+        guess = float(np.median(proj) if proj.size else 1e-20)
+        lo, hi = math.log(MAP_FLOOR**2 * 1e-2), math.log(max(guess, 1e-18) * 1e2)
+        res = sp.optimize.minimize_scalar(nll, bounds=(lo, hi), method="bounded")
+        s2 = math.exp(res.x)
+        w = s2 / (lam + s2)
+        stats_dof = float(scale * np.sum(w**2))
+        #: squared correlation of the along-cut sum of squares with the ML score
+        #: (1: the estimate fixes that statistic, which then tells nothing)
+        self.ml_rho2 = float(np.sum(w) ** 2 / max(w.size * np.sum(w**2), 1e-300))
+        return math.sqrt(s2), stats_dof + n_direct, stats_dof
 
     def _stats(self, rr: np.ndarray) -> np.ndarray:
         """Interval statistics ``L^-1 X^T r`` of cut residuals (n_stats, m)."""
