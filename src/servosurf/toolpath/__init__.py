@@ -2,7 +2,8 @@
 
 Flow: :func:`load_toolpath` (TOML) -> :func:`sample` (controller-rate samples, whole
 or only the windows that cut a field) -> deviations added to ``path.z`` by the servo,
-force and vibration stages -> :func:`sweep` (lower envelope of the tool arc) ->
+force and vibration stages -> :func:`sweep` (lower envelope of the tool arc) or
+:func:`sweep_ordered` (the passes in time order under material rules) ->
 :class:`~servosurf.metrology.Surface`.
 
 Units are SI: m, s, rad, Hz; spindle speed in rev/s. TOML files may use the boundary
@@ -11,6 +12,7 @@ aliases ``spindle-speed-rpm`` and ``<angle>-deg``.
 
 from __future__ import annotations
 
+from ._ordered import CuttingRules, sweep_ordered
 from ._paths import (
     FacingToolpath,
     LensletToolpath,
@@ -41,6 +43,8 @@ __all__ = [
     "count_samples",
     "field_reach",
     "sweep",
+    "sweep_ordered",
+    "CuttingRules",
     "check_clearance",
     "lenslet_chord",
     "lenslet_cut_fraction",
