@@ -17,7 +17,12 @@
      including the structural modes).
 
    The parts add (the loop is linear; the chip force is computed inside the loop).
-   Hooks may add further terms outside the loop (``path_z``).
+   Hooks may add further terms outside the loop (``path_z``). Parts beyond the
+   loop (off by default, :mod:`servosurf._parts`): ``out-of-loop`` (frame motion
+   that bypasses the loop when the sensor targets the FTS base) and ``spindle``
+   (asynchronous spindle axial error) add to the tool height; ``ploughing``,
+   ``side-flow`` and ``recovery`` switch the kernel to the time-ordered sweep
+   with material rules.
 3. **Kernel** (:func:`servosurf.toolpath.sweep`): the exact lower envelope of the
    tool's nose arc in the radial-axial plane, on the field's grid.
 4. **Instrument** (optional): an interferometer model (resampling, optical blur,
@@ -39,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _progress
+from . import _parts, _progress
 from .cutting._force import ChipModel, Workpiece, facing_chip_area, load_workpiece
 from .errors import ConfigError
 from .metrology._surface import Surface
@@ -52,11 +57,15 @@ __all__ = [
     "realisation_study",
     "RealisationStudy",
     "PARTS",
+    "DEFAULT_PARTS",
     "SETTLE_TIME",
 ]
 
-#: Deviation parts that can be switched on and off.
-PARTS = ("tracking", "force", "vibration")
+#: Model parts that can be switched on and off: the servo loop's deviations, then
+#: (issue 18) the terms outside the loop and the material rules of the sweep.
+PARTS = _parts.ALL_PARTS
+#: Parts of a default simulation (the servo loop's deviations).
+DEFAULT_PARTS = _parts.LOOP_PARTS
 #: Pre-roll before the first sample that can cut the field, in s (loop settling).
 SETTLE_TIME = 0.05
 #: Refuse a continuous time span longer than this many samples (memory guard).
@@ -141,7 +150,7 @@ def simulate(
     bandwidth: float | None = None,
     mass: float | None = None,
     seed: int = 0,
-    parts: Sequence[str] = PARTS,
+    parts: Sequence[str] = DEFAULT_PARTS,
     instrument=None,
     hooks: Sequence[Any] = (),
     n_threads: int | None = None,
@@ -163,7 +172,8 @@ def simulate(
     seed : int, default: 0
         Seed of the vibration realisation and the instrument noise.
     parts : sequence of str, default: ("tracking", "force", "vibration")
-        Deviation parts to include (any subset of :data:`PARTS`).
+        Model parts to include (any subset of :data:`PARTS`; the default is
+        :data:`DEFAULT_PARTS`).
     instrument : Interferometer, str or None, optional
         Interferometer model applied to the machined map (None: no measurement model).
     hooks : sequence, optional
@@ -177,7 +187,7 @@ def simulate(
         The map, the deviations and the settings.
     """
     from .noise._synthesis import realise
-    from .toolpath import ToolpathSpec, check_clearance, load_toolpath, sample, sweep
+    from .toolpath import ToolpathSpec, check_clearance, load_toolpath, sample
 
     bad = [p for p in parts if p not in PARTS]
     if bad:
@@ -264,6 +274,8 @@ def simulate(
             fol += real.following
         else:
             dev["vibration"] = np.zeros(n)
+        # parts outside the loop (issue 18): out-of-loop frame motion, spindle error
+        dev.update(_parts.outside_loop(loop, parts, n, seed))
         extra = np.zeros(n)
         for h in hooks:
             if hasattr(h, "path_z"):
@@ -292,7 +304,9 @@ def simulate(
             from .io import read_surface
 
             initial = read_surface(workpiece.precut.file)
-        surface = sweep(path, tool, spec.field, initial=initial, n_threads=n_threads)
+        # material parts (issue 18) switch to the time-ordered sweep
+        surface = _parts.machine_surface(path, tool, spec.field, initial, workpiece,
+                                         parts, n_threads=n_threads)
 
     ctx = {
         "spec": spec,
@@ -320,6 +334,7 @@ def simulate(
         "specific_thrust_pressure_pa": workpiece.material.specific_thrust_pressure,
         "controller_rate_hz": fs,
         "hooks": [type(h).__name__ for h in hooks],
+        **_parts.part_settings(machine, tool, workpiece, parts),
     }
     surface = surface.replace(metadata={**surface.metadata, "simulation": settings})
     measured = None

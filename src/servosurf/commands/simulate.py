@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from .._parts import ALL_PARTS, LOOP_PARTS
 from ._common import add_scheduler_args
 
 FORMATS = ("datx", "dat", "x3p", "xyz", "npz")
@@ -47,9 +48,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--parts",
         metavar="PART",
         nargs="+",
-        choices=("tracking", "force", "vibration"),
-        default=["tracking", "force", "vibration"],
-        help="deviation parts to include (default: all)",
+        choices=ALL_PARTS,
+        default=list(LOOP_PARTS),
+        help="model parts to include (default: tracking force vibration, the servo "
+        "loop). Beyond the loop: out-of-loop (frame motion that bypasses the loop "
+        "when the machine's sensor.target is fts-base), spindle (asynchronous "
+        "spindle axial error, machine [spindle]), ploughing (minimum chip "
+        "thickness), side-flow (ridges at the cusps), recovery (elastic recovery "
+        "by local chip thickness); the last three scale with the tool's "
+        "edge-radius (m) and the workpiece's [material] ratios",
     )
     p.add_argument(
         "--instrument",
