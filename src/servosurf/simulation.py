@@ -88,7 +88,8 @@ class SimulationResult:
         Commanded tool height, m.
     deviation : dict of str to ndarray of shape (n,)
         Tool-height deviation per part (``tracking``, ``force``, ``vibration``,
-        ``hooks``), m; their sum is added to the commanded path.
+        ``hooks``, and ``out-of-loop``/``spindle`` when switched on), m; their sum
+        is added to the commanded path.
     force : ndarray of shape (n,)
         Thrust force on the tool, N.
     following_error : ndarray of shape (n,)
