@@ -268,3 +268,27 @@ def test_rules_validation():
         spec = facing_case(nx=3, ny=3)
         tp.sweep_ordered(tp.sample(spec, field=spec.field), spec.tool, spec.field,
                          rules=ALL, bogus=1)
+
+
+def test_side_flow_ridge_from_across_the_axis():
+    """A point cut first by a pass on its own side (tip at x = +22 um), then met by
+    the arc of a pass on the far side of the axis (tip at x = -16 um): the two arcs
+    cross at x = 3 um and beyond it the far pass leaves a ridge whose lateral
+    distance uses the physical slopes (x + 16 um)/R and (x - 22 um)/R."""
+    a, b = 1e-9, 0.4e-6
+    rules = tp.CuttingRules(side_flow_height=a, side_flow_width=b)
+    r1, r2 = 22e-6, 16e-6
+    n = 4000
+    theta = np.linspace(-np.pi / 2, 3 * np.pi / 2, n)  # crossings at 0 and pi
+    r = np.where(theta < np.pi / 2, r1, r2)
+    path = tp.SampledPath(np.arange(n) / 1e4, theta, r, np.full(n, -D), 1e4)
+    x = np.linspace(2e-6, 4e-6, 401)
+    field = tp.Field(pitch_x=x[1] - x[0], pitch_y=1e-6, nx=x.size, ny=1,
+                     center_x=0.5 * (x[0] + x[-1]), center_y=0.0)
+    z = tp.sweep_ordered(path, tp.Tool(), field, rules=rules).z[0]
+    z1, z2 = _arc(x - r1), _arc(x + r2)  # the far tip sits at x = -r2
+    d = (z2 - z1) / ((r1 + r2) / R)  # slopes differ by (r1 + r2) / R
+    expected = np.where(d > 0, z1 + np.where(d < b, a * (1 - d / b), 0.0), z2)
+    away = np.abs(x - 0.5 * (r1 - r2)) > 2 * (x[1] - x[0])
+    np.testing.assert_allclose(z[away], expected[away], rtol=0, atol=ATOL_REFERENCE)
+    assert z.max() - np.minimum(z1, z2).max() == pytest.approx(a, rel=0.02)

@@ -134,8 +134,9 @@ def test_flat_face_ra_closed_form_on_a_synthetic_map():
 
     x = np.arange(3000) * 0.01e-6  # 15 periods of 2 um, 200 samples each
     # a tilted cosine (orthogonal to the plane over whole periods)
-    z = 1e-9 * np.cos(2 * np.pi * x / 2e-6) + 3e-7 * x
-    s = Surface(np.tile(z, (20, 1)), 0.01e-6, 0.01e-6)
+    z = 1e-9 * np.cos(2 * np.pi * x / 2e-6) + 1e-4 * x  # 3 nm over the field
+    y = np.arange(20)[:, None] * 0.01e-6
+    s = Surface(z[None, :] + 2e-3 * y, 0.01e-6, 0.01e-6)  # and 0.4 nm along y
     # Ra of a sinusoid of amplitude A is 2A/pi; the tilt is removed
     assert flat_face_ra(s) == pytest.approx(2e-9 / math.pi, rel=2e-3)
 
