@@ -141,19 +141,30 @@ def test_flat_face_ra_closed_form_on_a_synthetic_map():
     assert flat_face_ra(s) == pytest.approx(2e-9 / math.pi, rel=2e-3)
 
 
+def test_budget_steps_add_one_part_each():
+    labels = [label for label, _ in BUDGET_STEPS]
+    assert labels[0] == "kinematic" and len(set(labels)) == len(labels)
+    assert BUDGET_STEPS[1][1] == DEFAULT_PARTS
+    for (_, a), (_, b) in zip(BUDGET_STEPS[1:], BUDGET_STEPS[2:], strict=False):
+        assert set(a) < set(b) and len(set(b) - set(a)) == 1
+    assert set(BUDGET_STEPS[-1][1]) == set(PARTS)
+
+
 def test_budget_rows_are_simulate_runs(small_flat):
-    b = flat_face_budget(small_flat, instrument=None, seed=3)
-    labels = [r["label"] for r in b.rows]
-    assert labels == [s[0] for s in BUDGET_STEPS]
+    steps = (("kinematic", ()), ("servo loop", DEFAULT_PARTS),
+             ("everything", PARTS))
+    b = flat_face_budget(small_flat, instrument=None, seed=3, steps=steps)
+    assert [r["label"] for r in b.rows] == ["kinematic", "servo loop", "everything"]
     ra = b.ra_by_part()
     assert ra["kinematic"] == pytest.approx(kinematic_ra(small_flat), rel=0.01)
-    # every row equals a direct simulate() of that step (the replay adds the same
+    assert b.rows[0]["added_ra_m"] is None
+    assert b.rows[2]["added_ra_m"] == pytest.approx(ra["everything"]
+                                                    - ra["servo loop"])
+    # a row equals a direct simulate() of its step (the replay adds the same
     # deviations)
-    for row in (b.rows[1], b.rows[3], b.rows[6]):
-        direct = simulate(small_flat, machine=fts_base_machine(), seed=3,
-                          parts=tuple(row["parts"]), instrument=None, **KW)
-        assert row["ra_m"] == pytest.approx(flat_face_ra(direct.surface),
-                                            rel=1e-9)
+    direct = simulate(small_flat, machine=fts_base_machine(), seed=3, parts=PARTS,
+                      instrument=None, **KW)
+    assert ra["everything"] == pytest.approx(flat_face_ra(direct.surface), rel=1e-9)
     assert b.settings["sensor_target"] == "fts-base"
     assert b.settings["material_rules"]["min_chip_thickness_m"] == pytest.approx(
         0.25 * 20e-9)
