@@ -31,7 +31,7 @@ class CuttingRules:
     ----------
     min_chip_thickness : float, default: 0.0
         h_min, in m: a pass removes material only where ``h > h_min``; below it the
-        material is ploughed and stays (Brammertz, Industrie-Anzeiger 83 (1961) 525:
+        material is ploughed and stays (Brammertz, Industrie-Anzeiger 83 (1961):
         ``Rt = f^2/(8R) + (h_min/2)(1 + R h_min / f^2)``).
     side_flow_height : float, default: 0.0
         a, in m: height of the side-flow ridge at the boundary of a cut.

@@ -82,7 +82,7 @@ class Tool:
         20e-9, unit="m", doc="cutting-edge (hone) radius r_n",
         source="sharp single-crystal diamond: 5-50 nm (Ikawa et al., CIRP Ann. 40 "
                "(1991) 587: a few nm; conventional polishing limit 25-45 nm, Semba et "
-               "al., Trans. JSME 88 (2022) 907); used by the material parts only",
+               "al., Trans. JSME 88 (907) (2022)); used by the material parts only",
         low=0.0, low_open=True)
     waviness_angle: tuple[float, ...] = param(
         default_factory=tuple, unit="rad", doc="contact angles of the waviness profile")
