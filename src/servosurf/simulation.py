@@ -18,7 +18,12 @@
      including the structural modes).
 
    The parts add (the loop is linear; the chip force is computed inside the loop).
-   Hooks may add further terms outside the loop (``path_z``).
+   Hooks may add further terms outside the loop (``path_z``). Parts beyond the
+   loop (off by default, :mod:`servosurf._parts`): ``out-of-loop`` (frame motion
+   that bypasses the loop when the sensor targets the FTS base) and ``spindle``
+   (asynchronous spindle axial error) add to the tool height; ``ploughing``,
+   ``side-flow`` and ``recovery`` switch the kernel to the time-ordered sweep
+   with material rules.
 3. **Kernel** (:func:`servosurf.toolpath.sweep`): the exact lower envelope of the
    tool's nose arc in the radial-axial plane, on the field's grid.
 4. **Instrument** (optional): an interferometer model (resampling, optical blur,
@@ -40,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _progress
+from . import _parts, _progress
 from .cutting._force import ChipModel, Workpiece, facing_chip_area, load_workpiece
 from .errors import ConfigError
 from .metrology._surface import Surface
@@ -54,11 +59,15 @@ __all__ = [
     "RealisationStudy",
     "PARTS",
     "KINEMATIC",
+    "DEFAULT_PARTS",
     "SETTLE_TIME",
 ]
 
-#: Deviation parts that can be switched on and off.
-PARTS = ("tracking", "force", "vibration")
+#: Model parts that can be switched on and off: the servo loop's deviations, then
+#: (issue 18) the terms outside the loop and the material rules of the sweep.
+PARTS = _parts.ALL_PARTS
+#: Parts of a default simulation on the FTS (the servo loop's deviations).
+DEFAULT_PARTS = _parts.LOOP_PARTS
 #: The commanded path alone (no loop, no axis dynamics); not combined with PARTS.
 KINEMATIC = "kinematic"
 #: Default machine of NC programs: ideal machine axes (a kinematic run).
@@ -85,7 +94,8 @@ class SimulationResult:
         Commanded tool height, m.
     deviation : dict of str to ndarray of shape (n,)
         Tool-height deviation per part (``tracking``, ``force``, ``vibration``,
-        ``hooks``), m; their sum is added to the commanded path.
+        ``hooks``, and ``out-of-loop``/``spindle`` when switched on), m; their sum
+        is added to the commanded path.
     force : ndarray of shape (n,)
         Thrust force on the tool, N.
     following_error : ndarray of shape (n,)
@@ -220,11 +230,11 @@ def simulate(
     seed : int, default: 0
         Seed of the vibration realisation and the instrument noise.
     parts : sequence of str, optional
-        Deviation parts to include: any subset of :data:`PARTS` (default: all of
-        them for the FTS; ``("tracking", "vibration")`` for an NC program on the
-        FTS; ``("tracking",)`` on a second-order axis), or ``("kinematic",)``:
-        the commanded path alone, swept at its own resolution (NC programs: the
-        block end points) without the loop.
+        Model parts to include: any subset of :data:`PARTS` (default:
+        :data:`DEFAULT_PARTS` for the FTS; ``("tracking", "vibration")`` for an NC
+        program on the FTS; ``("tracking",)`` on a second-order axis), or
+        ``("kinematic",)``: the commanded path alone, swept at its own resolution
+        (NC programs: the block end points) without the loop.
     instrument : Interferometer, str or None, optional
         Interferometer model applied to the machined map (None: no measurement model).
     hooks : sequence, optional
@@ -238,7 +248,7 @@ def simulate(
         The map, the deviations and the settings.
     """
     from .noise._synthesis import realise
-    from .toolpath import ToolpathSpec, check_clearance, load_toolpath, sample, sweep
+    from .toolpath import ToolpathSpec, check_clearance, load_toolpath, sample
 
     if parts is not None:
         parts = tuple(parts)
@@ -279,7 +289,7 @@ def simulate(
         return simulate_axes(spec, tool, machine, workpiece, parts, seed=int(seed),
                              instrument=instrument, hooks=hooks, n_threads=n_threads)
     if parts is None:
-        parts = ("tracking", "vibration") if spec.kind == "nc" else PARTS
+        parts = ("tracking", "vibration") if spec.kind == "nc" else DEFAULT_PARTS
     if spec.kind == "nc" and "force" in parts:
         raise ConfigError(
             "the cutting-force part needs the chip of a facing or lenslet path; for "
@@ -351,6 +361,8 @@ def simulate(
             fol += real.following
         else:
             dev["vibration"] = np.zeros(n)
+        # parts outside the loop (issue 18): out-of-loop frame motion, spindle error
+        dev.update(_parts.outside_loop(loop, parts, n, seed))
         extra = np.zeros(n)
         for h in hooks:
             if hasattr(h, "path_z"):
@@ -373,8 +385,9 @@ def simulate(
         check_clearance(path, tool)
 
     with _progress.stage(f"kernel on {spec.field.ny} x {spec.field.nx} grid"):
-        surface = sweep(path, tool, kfield, initial=_initial(spec, workpiece),
-                        n_threads=n_threads)
+        # material parts (issue 18) switch to the time-ordered sweep
+        surface = _parts.machine_surface(path, tool, kfield, _initial(spec, workpiece),
+                                         workpiece, parts, n_threads=n_threads)
         surface = _physical(spec, surface)
 
     ctx = {
@@ -403,6 +416,7 @@ def simulate(
         "specific_thrust_pressure_pa": workpiece.material.specific_thrust_pressure,
         "controller_rate_hz": fs,
         "hooks": [type(h).__name__ for h in hooks],
+        **_parts.part_settings(machine, tool, workpiece, parts),
     }
     if spec.kind == "nc":
         settings["nc"] = spec.path.describe()

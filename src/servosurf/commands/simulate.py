@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from .._parts import ALL_PARTS
 from ._common import add_scheduler_args
 
 FORMATS = ("datx", "dat", "x3p", "xyz", "npz")
@@ -53,12 +54,18 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--parts",
         metavar="PART",
         nargs="+",
-        choices=("tracking", "force", "vibration", "kinematic"),
+        choices=(*ALL_PARTS, "kinematic"),
         default=None,
-        help="deviation parts to include: tracking, force, vibration (default: all "
-        "of them on the FTS, tracking on a second-order machine axis), or kinematic "
-        "alone: the commanded path without the loop (the default of NC programs, "
-        "whose default machine has ideal axes)",
+        help="model parts to include (default: tracking force vibration, the servo "
+        "loop, on the FTS; tracking on a second-order machine axis). Beyond the "
+        "loop: out-of-loop (frame motion that bypasses the loop when the "
+        "machine's sensor.target is fts-base), spindle (asynchronous spindle axial "
+        "error, machine [spindle]), ploughing (minimum chip thickness), side-flow "
+        "(ridges at the cusps), recovery (elastic recovery by local chip "
+        "thickness); the last three scale with the tool's edge-radius (m) and the "
+        "workpiece's [material] ratios. Or kinematic alone: the commanded path "
+        "without the loop (the default of NC programs, whose default machine has "
+        "ideal axes)",
     )
     p.add_argument(
         "--instrument",

@@ -1,4 +1,5 @@
-"""Cutting: workpiece material, pre-cut surface, chip section and thrust force."""
+"""Cutting: workpiece material, pre-cut surface, chip section, thrust force and the
+material rules of the time-ordered sweep (ploughing, side flow, elastic recovery)."""
 
 from ._force import (
     DEFAULT_WORKPIECE,
@@ -10,6 +11,7 @@ from ._force import (
     load_workpiece,
     segment_area,
 )
+from ._rules import MATERIAL_PARTS, cutting_rules
 
 __all__ = [
     "DEFAULT_WORKPIECE",
@@ -20,4 +22,6 @@ __all__ = [
     "facing_chip_area",
     "load_workpiece",
     "segment_area",
+    "MATERIAL_PARTS",
+    "cutting_rules",
 ]

@@ -56,6 +56,56 @@ class Material:
         source="assumed; reported only",
     )
     source: str = param("", doc="where the coefficients come from")
+    # -- material parts of the forward model (switched on by simulate's parts
+    # "ploughing", "side-flow" and "recovery"); heights scale with the tool's
+    # cutting-edge radius r_n (tool.edge-radius)
+    min_chip_thickness_ratio: float = param(
+        0.25,
+        unit="",
+        low=0.0,
+        high=1.0,
+        doc="h_min / r_n: minimum chip thickness over the cutting-edge radius",
+        source="ductile metals cut with diamond: 0.2-0.4 (Yuan, Zhou, Dong, J. Mater. "
+        "Process. Technol. 62 (1996) 327; Son, Lim, Ahn, Int. J. Mach. Tools Manuf. "
+        "45 (2005) 529); not measured for NiP",
+    )
+    side_flow_height_ratio: float = param(
+        0.05,
+        unit="",
+        low=0.0,
+        high=1.0,
+        doc="a / r_n: side-flow ridge height at the cut boundary over r_n",
+        source="assumed; side flow at the feed-mark ridges: Liu & Melkote, Int. J. "
+        "Mach. Tools Manuf. 46 (2006) 1778; Zong et al., ibid. 84 (2014) 58",
+    )
+    side_flow_width_ratio: float = param(
+        10.0,
+        unit="",
+        low=0.0,
+        high=1000.0,
+        doc="b / r_n: lateral half-width of the side-flow ridge over r_n",
+        source="assumed (ridge about ten edge radii wide)",
+    )
+    recovery_ratio: float = param(
+        0.1,
+        unit="",
+        low=0.0,
+        high=1.0,
+        doc="d0 / r_n: elastic recovery of a cut surface at vanishing chip thickness",
+        source="assumed, of the order of a few H/E of the edge radius: electroless "
+        "NiP H 5-7 GPa, E 100-200 GPa (Weil & Parker, in Mallory & Hajdu, "
+        "Electroless Plating, AESF 1990, ch. 4); swelling and recovery in diamond "
+        "turning: Kong, Lee, Cheung, To, J. Mater. Process. Technol. 180 (2006) 210",
+    )
+    recovery_decay_ratio: float = param(
+        1.0,
+        unit="",
+        low=0.0,
+        low_open=True,
+        high=100.0,
+        doc="h_d / r_n: chip thickness over which the recovery decays, over r_n",
+        source="assumed (the edge radius sets where ploughing gives way to cutting)",
+    )
 
 
 @dataclass(frozen=True)

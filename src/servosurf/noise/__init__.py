@@ -1,4 +1,5 @@
-"""Disturbance PSDs, frequency-domain error synthesis (Eqs 8-12), realisations."""
+"""Disturbance PSDs, frequency-domain error synthesis (Eqs 8-12), realisations,
+and the spindle's asynchronous axial error motion."""
 
 from ._psd import (
     PAPER_RECORD_LENGTH,
@@ -9,6 +10,7 @@ from ._psd import (
     welch_psd,
     write_psd_csv,
 )
+from ._spindle import psd_series, realise_spindle_axial
 from ._stream import BLOCK, VibrationStream
 from ._study import (
     DesignStudy,
@@ -27,6 +29,8 @@ __all__ = [
     "read_psd_csv",
     "welch_psd",
     "write_psd_csv",
+    "psd_series",
+    "realise_spindle_axial",
     "BLOCK",
     "VibrationStream",
     "DesignStudy",

@@ -1,9 +1,18 @@
-"""Reports: the seed-paper table, measured profiles against simulated ones, and the
-roughness of an NC-program run."""
+"""Reports: the seed-paper table, the metrology summary of a simulation (one
+flat-face Ra definition), the flat face's Ra by model part, measured profiles
+against simulated ones, and the roughness of an NC-program run."""
 
+from ._flatface import (
+    BUDGET_STEPS,
+    PAPER_FLAT_RA,
+    FlatFaceBudget,
+    FlatFaceModel,
+    flat_face_budget,
+)
 from ._nc import analyse_nc, centre_profile
 from ._paper import GROUPS, Row, paper_table, row_group
 from ._profile_compare import ProfileComparison, compare_profiles
+from ._simulation import FLAT_RA_DEFINITION, analyse, flat_face_ra
 
 __all__ = [
     "GROUPS",
@@ -14,4 +23,12 @@ __all__ = [
     "compare_profiles",
     "analyse_nc",
     "centre_profile",
+    "analyse",
+    "flat_face_ra",
+    "FLAT_RA_DEFINITION",
+    "flat_face_budget",
+    "FlatFaceBudget",
+    "FlatFaceModel",
+    "BUDGET_STEPS",
+    "PAPER_FLAT_RA",
 ]

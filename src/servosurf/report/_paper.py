@@ -260,15 +260,9 @@ def _nearest(values: list[float], target: float) -> float:
     return min(values, key=lambda v: abs(v - target)) if values else float("nan")
 
 
-#: Field used for the flat-face roughness rows: 200 x 200 pixels at 0.55 um (a
-#: 110 um square, 55 feed marks), small enough to keep `servosurf paper` quick.
-FLAT_FIELD_PIXELS = 200
-
-
 @row_group("surface")
 def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     """Rows of the lenslet and flat cuts (paper sections 4.2, 5.3, Table 2)."""
-    import dataclasses
     from pathlib import Path
 
     from ..simulation import simulate
@@ -389,10 +383,9 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
         "10 um lenslet peaks are compared within 15 %: the paper's own two "
         "lenslets put the same first mode 11 % apart (7.2 and 6.6 kHz)."
     )
-    # flat face: roughness by model part (no fudge term)
+    # flat face: roughness by model part (no fudge term), the one flat-face Ra
+    # definition (report.flat_face_ra: the toolpath's whole field, no filter)
     spec = load_toolpath(tp_dir / "flat_facing.toml")
-    fld = dataclasses.replace(spec.field, nx=FLAT_FIELD_PIXELS, ny=FLAT_FIELD_PIXELS)
-    spec = dataclasses.replace(spec, field=fld)
     feed, rad = spec.path.feed_per_rev, spec.tool.nose_radius
     ra_kin = feed**2 / (18 * np.sqrt(3) * rad)
     parts_sets = {

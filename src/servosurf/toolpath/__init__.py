@@ -7,7 +7,8 @@ nose-compensated spiral (:class:`DesignToolpath`), and NC programs
 
 Flow: :func:`load_toolpath` -> :func:`sample` (controller-rate samples, whole or only
 the windows that cut a field) -> deviations added to ``path.z`` by the servo, force
-and vibration stages -> :func:`sweep` (lower envelope of the tool arc) ->
+and vibration stages -> :func:`sweep` (lower envelope of the tool arc) or
+:func:`sweep_ordered` (the passes in time order under material rules) ->
 :class:`~servosurf.metrology.Surface`. A measured tool edge (:func:`read_tool_edge`)
 gives the :class:`Tool` its nose radius and edge deviation.
 
@@ -41,6 +42,7 @@ from ._edge import (
     tool_table_from_trace,
 )
 from ._nc import NC_FORMATS, NCProgram, read_nc_program
+from ._ordered import CuttingRules, sweep_ordered
 from ._paths import (
     FacingToolpath,
     LensletToolpath,
@@ -87,6 +89,8 @@ __all__ = [
     "count_samples",
     "field_reach",
     "sweep",
+    "sweep_ordered",
+    "CuttingRules",
     "check_clearance",
     "lenslet_chord",
     "lenslet_cut_fraction",
