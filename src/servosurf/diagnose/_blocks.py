@@ -58,8 +58,13 @@ AMBIGUITY_SIGMAS = 4.0
 #: (or than half the interval statistics) and the instrument sigma is estimated by
 #: maximum likelihood of the statistics too.
 MIN_SIGMA_POINTS = 2000
-#: Segments (revolutions) used by that maximum-likelihood estimate.
+#: Range of the tool-noise power scale profiled from a map (a factor 2 on a
+#: disturbance PSD is a recalibration, not physics: DISCOVERY.md, issue 19).
+TOOL_SCALE_BOUNDS = (0.5, 2.0)
+#: Segments (revolutions) used by the maximum-likelihood estimates.
 ML_SEGMENTS = 24
+#: Points closer than this to the cut boundary (in the plane) are left out, m.
+EDGE_BAND = 2e-6
 #: At most this many uncut points of a map are used.
 MAX_UNCUT = 20000
 
@@ -749,7 +754,18 @@ class PointsBlock(Block):
         # heights the Gaussian model cannot describe
         rt = tool_autocov_table(ctx, p0)
         ambiguous = gap < AMBIGUITY_SIGMAS * math.sqrt(2.0 * max(rt[0], 0.0))
-        keep = ~(np.abs(hmin) < EDGE_MARGIN) & ~(cut & ambiguous)
+        # ... and a band around the cut boundary (the rim of a lenslet): there the
+        # surface has a kink, which an instrument's optical and pixel transfer
+        # function rounds over about its resolution (not described by the
+        # smoothing nuisance below)
+        near_edge = np.zeros(cut.shape, dtype=bool)
+        for ddx, ddy in ((EDGE_BAND, 0.0), (-EDGE_BAND, 0.0), (0.0, EDGE_BAND),
+                         (0.0, -EDGE_BAND)):
+            kd = surface_heights(case, PointSet(case, x + ddx, y + ddy), p0, traj,
+                                 return_pass=True)[1]
+            near_edge |= (kd >= 0) != cut
+        keep = (~(np.abs(hmin) < EDGE_MARGIN) & ~(cut & ambiguous) & ~near_edge
+                & ~self._near_border(x, y))
         # the uncut top only carries instrument noise, piston and tilt: thin it
         unc = np.nonzero(keep & ~cut)[0]
         if unc.size > MAX_UNCUT:
@@ -767,6 +783,37 @@ class PointsBlock(Block):
         self.n = int(self.dof)
 
     # ------------------------------------------------------------ build
+    def _near_border(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Points within :data:`EDGE_BAND` of the border of the valid data.
+
+        An instrument's smoothing is one-sided there (the map's edge, a void or
+        a dropout): its transfer function differs from the interior's.
+        """
+        if self.grid is None:
+            d = np.hypot(np.diff(x), np.diff(y))
+            step = float(np.median(d)) if d.size else 1.0
+            m = int(math.ceil(EDGE_BAND / max(step, 1e-12)))
+            out = np.zeros(x.size, dtype=bool)
+            out[:m] = out[-m:] = True
+            if x.size > 1:  # gaps in a profile
+                gap = np.nonzero(d > 1.5 * step)[0]
+                for g in gap:
+                    out[max(g - m + 1, 0) : g + m + 1] = True
+            return out
+        import scipy.ndimage as ndi
+
+        shape, flat = self.grid
+        valid = np.zeros(shape[0] * shape[1], dtype=bool)
+        valid[flat] = True
+        valid = valid.reshape(shape)
+        dx = float(np.min(np.abs(np.diff(np.unique(x))))) if np.unique(x).size > 1 \
+            else EDGE_BAND
+        m = int(math.ceil(EDGE_BAND / max(dx, 1e-12)))
+        inner = ndi.binary_erosion(np.pad(valid, m, constant_values=False),
+                                   structure=np.ones((2 * m + 1, 2 * m + 1)))
+        inner = inner[m:-m, m:-m] if m else inner
+        return ~inner.ravel()[flat]
+
     def _nuisance(self, p0: ModelParams) -> np.ndarray:
         x, y = self.pts.x, self.pts.y
         cols = [np.ones_like(x)]
@@ -790,6 +837,26 @@ class PointsBlock(Block):
                 self.ctx.case, PointSet(self.ctx.case, x - dx, y - dy), p0, traj
             )
             cols.append((hp - hm) / (2 * d) * 1e-6)
+        # the instrument's smoothing (optical PSF, pixel integration, resampling):
+        # to first order any symmetric kernel of variance s^2 adds (s^2 / 2) times
+        # the Laplacian of the heights, profiled out like piston and tilt
+        h0 = surface_heights(self.ctx.case, self.pts, p0, traj)
+        dl = self._pitch
+        lap = -2.0 * h0 if self.kind == "profile" else -4.0 * h0
+        offsets = ((dl, 0.0), (-dl, 0.0), (0.0, dl), (0.0, -dl))
+        if self.kind == "profile":
+            s = self.along[self.keep] if self.along is not None else None
+            ux, uy = (1.0, 0.0)
+            if s is not None and x.size > 1:
+                dxy = np.array([x[-1] - x[0], y[-1] - y[0]])
+                nrm = float(np.hypot(*dxy))
+                if nrm > 0:
+                    ux, uy = dxy / nrm
+            offsets = ((dl * ux, dl * uy), (-dl * ux, -dl * uy))
+        for ddx, ddy in offsets:
+            lap = lap + surface_heights(
+                self.ctx.case, PointSet(self.ctx.case, x + ddx, y + ddy), p0, traj)
+        cols.append(lap / dl**2 * 1e-12)
         return np.column_stack(cols)
 
     def _build_weights(self, p0: ModelParams, h0: np.ndarray) -> None:
@@ -922,15 +989,24 @@ class PointsBlock(Block):
         n_stats_dof = 0.0
         self.ml_rho2 = 0.0
         sig, dof_sig = None, math.inf
+        self.tool_scale = 1.0
+        self.stats_sigma = None
         if allv.size >= 16 and allv.size >= min(MIN_SIGMA_POINTS, 0.5 * n_stats):
             sig, kept = _clipped_sd(allv)
             dof_sig = (n_within + n_uncut) * kept
+            if tool_cov:
+                # the tool-noise level is a nuisance within TOOL_SCALE_BOUNDS: the
+                # disturbance PSDs are calibrations, and an instrument's resampling
+                # between rows smooths the tool error along the cut
+                self.stats_sigma, self.tool_scale, _ = self._noise_ml(
+                    r0, tool_cov, allv, sigma=max(sig, MAP_FLOOR))
         elif tool_cov:
             # too few instrument-only values (a facing map: one or two points per
             # interval, no uncut top): maximum likelihood of the statistics
-            # together with what there is
-            sig, dof_sig, n_stats_dof = self._sigma_ml(
-                r0, tool_cov, allv, n_within + n_uncut)
+            # together with what there is, sigma and tool-noise scale jointly
+            sig, self.tool_scale, n_stats_dof = self._noise_ml(r0, tool_cov, allv)
+            self.stats_sigma = sig
+            dof_sig = n_stats_dof + n_within + n_uncut
         if sig is None or not np.isfinite(sig) or not sig > 0:
             d = np.diff(r0)
             sig, kept = _clipped_sd(d - np.median(d))
@@ -953,9 +1029,10 @@ class PointsBlock(Block):
         self.wbins = None
         self.instrument_share = 0.0
         if tool_cov:
+            s_st = max(self.stats_sigma or self.sigma, self.sigma)
             for seg, c in tool_cov:
-                c = c.copy()
-                c[np.diag_indices_from(c)] += self.sigma**2
+                c = self.tool_scale * c
+                c[np.diag_indices_from(c)] += s_st**2
                 try:
                     ch = np.linalg.cholesky(c)
                 except np.linalg.LinAlgError:
@@ -973,22 +1050,30 @@ class PointsBlock(Block):
             # instrument variance: sigma^2 tr(C^-1) / m on average (what an
             # error in sigma moves in the along-cut test)
             self.instrument_share = float(
-                self.sigma**2 * self.wbins.multiply(self.wbins).sum() / n_stats
+                s_st**2 * self.wbins.multiply(self.wbins).sum() / n_stats
             )
         wx = self._whiten(X)
         q, _ = np.linalg.qr(wx)
         self.q = q
         self.dof = n - q.shape[1]
 
-    def _sigma_ml(self, r0, tool_cov, allv, n_direct):
-        """Instrument sigma (m) by maximum likelihood of the interval statistics.
+    def _noise_ml(self, r0, tool_cov, allv, sigma=None):
+        """Tool-noise scale (and, when ``sigma`` is None, the instrument sigma) by
+        maximum likelihood of the interval statistics.
 
-        ``nll(s) = sum_seg [log det(T + s^2 I) + b^T (T + s^2 I)^-1 b]
+        ``nll = sum_seg [log det(k T + s^2 I) + b^T (k T + s^2 I)^-1 b]
         + sum(v^2) / s^2 + n log s^2`` over at most :data:`ML_SEGMENTS` segments
         (eigendecomposition of each tool covariance T once), ``v`` the
-        instrument-only values. Returns the estimate, its equivalent dof (twice
-        the Fisher information of log s^2) and the part of it the statistics
-        carry.
+        instrument-only values, ``k`` in :data:`TOOL_SCALE_BOUNDS`.
+
+        Returns
+        -------
+        sigma : float
+            White level of the statistics in m (at least ``sigma`` when given).
+        scale : float
+            Tool-noise power scale ``k`` (dimensionless).
+        stats_dof : float
+            Equivalent dof the statistics carry about ``log s^2``.
         """
         st = self._stats(r0[:, None])[:, 0]
         parts = []
@@ -1000,23 +1085,42 @@ class PointsBlock(Block):
         proj = np.concatenate([p_[1] for p_ in parts])
         ssv = float(allv @ allv) if allv.size else 0.0
         nv = float(allv.size)
-        scale = len(tool_cov) / max(len(parts), 1)
+        wseg = len(tool_cov) / max(len(parts), 1)
+        lo_k, hi_k = (math.log(b_) for b_ in TOOL_SCALE_BOUNDS)
 
-        def nll(ls2):
-            s2 = math.exp(ls2)
-            d = lam + s2
-            return float(scale * np.sum(np.log(d) + proj / d)) + ssv / s2 + nv * ls2
+        def nll(lk, ls2):
+            s2, k = math.exp(ls2), math.exp(lk)
+            d = k * lam + s2
+            out = float(wseg * np.sum(np.log(d) + proj / d))
+            if sigma is None:
+                out += ssv / s2 + nv * ls2
+            return out
 
-        guess = float(np.median(proj) if proj.size else 1e-20)
-        lo, hi = math.log(MAP_FLOOR**2 * 1e-2), math.log(max(guess, 1e-18) * 1e2)
-        res = sp.optimize.minimize_scalar(nll, bounds=(lo, hi), method="bounded")
-        s2 = math.exp(res.x)
-        w = s2 / (lam + s2)
-        stats_dof = float(scale * np.sum(w**2))
-        #: squared correlation of the along-cut sum of squares with the ML score
-        #: (1: the estimate fixes that statistic, which then tells nothing)
-        self.ml_rho2 = float(np.sum(w) ** 2 / max(w.size * np.sum(w**2), 1e-300))
-        return math.sqrt(s2), stats_dof + n_direct, stats_dof
+        if sigma is not None:
+            # the statistics' own white level: at least the instrument sigma of
+            # the within-interval spread (more where the instrument resampled
+            # between rows, which the interval model leaves out)
+            lo_s = 2.0 * math.log(sigma)
+            bnd_s = (lo_s, lo_s + math.log(4.0))
+            res = sp.optimize.minimize(
+                lambda z: nll(z[0], z[1]), x0=[0.0, lo_s + 0.01],
+                bounds=[(lo_k, hi_k), bnd_s], method="L-BFGS-B")
+        else:
+            guess = float(np.median(proj) if proj.size else 1e-20)
+            bnd_s = (math.log(MAP_FLOOR**2 * 1e-2), math.log(max(guess, 1e-18) * 1e2))
+            res = sp.optimize.minimize(
+                lambda z: nll(z[0], z[1]), x0=[0.0, 0.5 * sum(bnd_s)],
+                bounds=[(lo_k, hi_k), bnd_s], method="L-BFGS-B")
+        lk, ls2 = (float(v) for v in res.x)
+        s2, k = math.exp(ls2), math.exp(lk)
+        w = s2 / (k * lam + s2)
+        stats_dof = float(wseg * np.sum(w**2))
+        # squared correlation of the along-cut sum of squares with the ML score
+        # (near 1: the estimate fixes that statistic, which then tells nothing);
+        # a scale at its bound leaves the statistic free
+        at_bound = min(abs(lk - lo_k), abs(lk - hi_k)) < 1e-3
+        self.ml_rho2 = 0.0 if at_bound else 1.0
+        return math.sqrt(s2), k, stats_dof
 
     def _stats(self, rr: np.ndarray) -> np.ndarray:
         """Interval statistics ``L^-1 X^T r`` of cut residuals (n_stats, m)."""
