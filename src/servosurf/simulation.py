@@ -133,6 +133,17 @@ def _span(spec, tool) -> tuple[float, float]:
     return span
 
 
+def _check_nyquist(spec, fs: float) -> None:
+    """Refuse a toolpath motion frequency the controller cannot represent."""
+    f = getattr(spec.path, "frequency", None)
+    if f is not None and f >= fs / 2:
+        raise ConfigError(
+            f"{spec.kind}.frequency = {f:g} Hz is at or above the controller's "
+            f"Nyquist frequency {fs / 2:g} Hz (controller.sample-rate {fs:g} Hz): the "
+            "servo cannot follow it; FTS frequencies are Hz to a few kHz"
+        )
+
+
 def simulate(
     toolpath,
     *,
@@ -204,6 +215,7 @@ def simulate(
     if tool is not spec.tool:
         spec = dataclasses.replace(spec, tool=tool)
     fs = machine.controller.sample_rate
+    _check_nyquist(spec, fs)
 
     with _progress.stage("servo loop"):
         loop = ServoLoop(machine)

@@ -17,11 +17,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "tracking, cutting-force and vibration deviations; write the height map, "
         "summary.json and PNG figures. Bandwidths are open-loop crossover frequencies.",
     )
-    p.add_argument("toolpath", metavar="TOOLPATH.toml", help="toolpath definition")
+    p.add_argument("toolpath", metavar="TOOLPATH",
+                   help="toolpath TOML file or built-in name (servosurf toolpaths)")
     p.add_argument(
         "--workpiece",
-        metavar="W.toml",
-        help="workpiece/material definition (default: electroless NiP, flat)",
+        metavar="W",
+        help="workpiece TOML file or built-in name (default: electroless NiP, flat)",
     )
     p.add_argument("--machine", metavar="M.toml", help="machine TOML or built-in name")
     p.add_argument(
@@ -87,8 +88,34 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "realisations.png instead of one map (default 1)",
     )
     add_scheduler_args(p, "the realisations (one task per seed)")
+    p.add_argument("--force", action="store_true",
+                   help="run even when the memory or disk estimate exceeds what this "
+                   "machine has")
     p.add_argument("--json", action="store_true", help="print summary.json on stdout")
     return p
+
+
+def _check_footprint(args, tp, out) -> None:
+    """Estimate memory and disk before allocating; refuse above the machine's."""
+    from .._resources import SIM_BYTES_PER_PIXEL, SIM_BYTES_PER_SAMPLE, check_resources
+    from ..servo import load_machine
+    from ..simulation import SETTLE_TIME, _span
+    from ..toolpath import load_toolpath
+
+    spec = load_toolpath(tp)
+    fs = load_machine(args.machine).controller.sample_rate
+    t0, t1 = _span(spec, spec.tool)
+    samples = (t1 - t0 + SETTLE_TIME) * fs
+    f = spec.field
+    pixels = float(f.nx) * float(f.ny)
+    memory = pixels * SIM_BYTES_PER_PIXEL + samples * SIM_BYTES_PER_SAMPLE
+    # map file, PNGs and an optional mesh (binary STL: 2 triangles of 50 B per pixel)
+    disk = pixels * (8 + (100 if args.mesh else 0)) + 5e6
+    check_resources(
+        f"{tp.stem}'s {f.ny} x {f.nx} px field with {samples:.3g} controller samples",
+        memory=memory, disk=disk, where=out, force=args.force,
+        remedy="lower field.nx/field.ny or raise field.pitch-x/pitch-y",
+    )
 
 
 def _write_map(surface, path, fmt):
@@ -102,32 +129,23 @@ def _write_map(surface, path, fmt):
 def run(args) -> int:
     from pathlib import Path
 
-    import numpy as np
-
+    from .._builtins import resolve_file
     from .._progress import stage
     from ..errors import ConfigError
     from ..report._simulation import analyse
     from ..simulation import simulate
     from ..viz import _surface_plots as sp
-    from ._common import out_dir, print_json, write_json
+    from ._common import check_flags, output_folder, print_json, write_json
 
-    if args.bandwidth is not None and not (
-        np.isfinite(args.bandwidth) and args.bandwidth > 0
-    ):
-        raise ConfigError(
-            f"--bandwidth must be a positive frequency in Hz, got {args.bandwidth!r}"
-        )
-    if args.mass is not None and not (np.isfinite(args.mass) and args.mass > 0):
-        raise ConfigError(f"--mass must be a positive mass in kg, got {args.mass!r}")
+    check_flags(args)  # --bandwidth, --mass: positive and plausible
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
-    tp = Path(args.toolpath)
-    if not tp.is_file():
-        raise ConfigError(f"{tp}: toolpath file not found")
+    tp = resolve_file(args.toolpath, kind="toolpath")  # a path or a built-in name
     if args.realisations < 1:
         raise ConfigError(f"--realisations must be >= 1, got {args.realisations}")
     fmt = args.format or "datx"
-    out = out_dir(args.out or Path("results") / tp.stem)
+    _check_footprint(args, tp, args.out or Path("results") / tp.stem)
+    out = output_folder(args.out or Path("results") / tp.stem)  # swapped in at the end
     settings = {  # the paper's cutting set-up unless given
         "machine": args.machine,
         "workpiece": args.workpiece,
@@ -195,7 +213,39 @@ def run(args) -> int:
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
+    _print_result(args, tp, res, summary, out)
     return 0
+
+
+def _print_result(args, tp, res, summary, out) -> None:
+    """The numbers a user came for, with units, and where they were written."""
+    from ._common import fmt_length, print_summary
+
+    s, f = summary, res.spec.field
+    rows = []
+    if s.get("form_error_max_m") is not None:
+        lag = s.get("form_error_lag_m")
+        rows.append(("max form error", fmt_length(s["form_error_max_m"])
+                     + (f" ({fmt_length(lag, 'um')} after the deepest point)"
+                        if lag is not None else "")))
+    if s.get("form_error_rms_m") is not None:
+        rows.append(("form error RMS", fmt_length(s["form_error_rms_m"])))
+    rough = [(k, s.get(f"{k.lower()}_m")) for k in ("Ra", "Sa", "Sq")]
+    rough = [(k, v) for k, v in rough if v is not None]
+    if rough:
+        rows.append((" / ".join(k for k, _ in rough),
+                     " / ".join(f"{v * 1e9:.3g}" for _, v in rough) + " nm"))
+    peaks = s.get("spectrum_peaks_per_m") or []
+    if peaks:
+        rows.append(("spectral peaks", ", ".join(f"{p * 1e-3:.0f}" for p in peaks[:5])
+                     + " mm^-1 (strongest first)"))
+    if s.get("deviation_max_m") is not None:
+        rows.append(("max tool deviation", fmt_length(s["deviation_max_m"])
+                     + f" (cutting force up to {s.get('force_max_n', 0):.3g} N)"))
+    title = (f"simulate {tp.stem}: {f.ny} x {f.nx} px at "
+             f"{f.pitch_x * 1e6:.3g} um, {res.machine.controller.bandwidth:g} Hz "
+             f"crossover, {res.machine.mechanics.moving_mass:g} kg, seed {args.seed}")
+    print_summary(args, title, rows, wrote=out)
 
 
 def _run_realisations(args, tp, out, settings) -> int:
@@ -228,7 +278,29 @@ def _run_realisations(args, tp, out, settings) -> int:
         write_json(out / "realisations.json", summary)
     if args.json:
         print_json(summary)
+    _print_realisations(args, tp, study, out)
     return 0
+
+
+def _print_realisations(args, tp, study, out) -> None:
+    """Mean and 5-95 % range of the headline metrics over the realisations."""
+    from ._common import print_summary
+
+    stats = study.statistics()
+    rows = []
+    for key, label, scale, unit in (
+        ("form_error_max_m", "max form error", 1e9, "nm"),
+        ("ra_m", "Ra", 1e9, "nm"),
+        ("sa_m", "Sa", 1e9, "nm"),
+        ("peak1_per_m", "strongest spectral peak", 1e-3, "mm^-1"),
+    ):
+        st = stats.get(key)
+        if st:
+            rows.append((label, f"mean {st['mean'] * scale:.4g} {unit}, 5-95 % "
+                         f"{st['p5'] * scale:.4g}..{st['p95'] * scale:.4g} {unit}"))
+    print_summary(args, f"simulate {tp.stem}: {study.seeds.size} vibration "
+                  f"realisations (seeds {study.seeds[0]}..{study.seeds[-1]})", rows,
+                  wrote=out)
 
 
 def _plot_realisations(study, path):
