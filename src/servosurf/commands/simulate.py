@@ -167,26 +167,12 @@ def run(args) -> int:
         files["map_png"] = str(
             sp.plot_map(surf, out / "map.png", title=f"{tp.stem}: simulated height map")
         )
-        files["highpass_png"] = str(
-            sp.plot_map(
-                plots["highpass"],
-                out / "highpass.png",
-                title="80 mm^-1 high-pass"
-                + (" of the form error" if "profile" in plots else ""),
-            )
-        )
-        freq, psd, peaks = plots["spectrum"]
-        speed = summary.get("surface_speed_m_per_s")
+        files["highpass_png"] = str(_highpass_figure(plots, out / "highpass.png"))
         files["spectrum_png"] = str(
-            sp.plot_spectrum(freq, psd, peaks, out / "spectrum.png", speed=speed)
-        )
+            _spectrum_figure(res, summary, plots, out / "spectrum.png"))
         if "profile" in plots:
-            y, z, fe = plots["profile"]
             files["profile_png"] = str(
-                sp.plot_profile_with_form_error(
-                    y, z, fe["reference"], fe["error"], out / "profile.png"
-                )
-            )
+                _profile_figure(res, plots, out / "profile.png"))
         _plot_deviation(res, out / "deviation.png")
         files["deviation_png"] = str(out / "deviation.png")
         if not args.no_render:
@@ -215,6 +201,70 @@ def run(args) -> int:
         print_json(summary)
     _print_result(args, tp, res, summary, out)
     return 0
+
+
+def _highpass_figure(plots, path):
+    """The 80 mm^-1 high-pass map, its filter-end rim masked, colours by percentile.
+
+    The Gaussian filter has no data beyond the map's edge (the lenslet's rim or the
+    field's border): within half a cut-off of it the high-pass holds the filter's
+    end effect, tens of times the texture, so that band is masked and the colour
+    scale spans the 0.5-99.5 percentiles of the rest.
+    """
+    import numpy as np
+    from scipy import ndimage
+
+    from ..report._simulation import HIGH_PASS_CUTOFF
+    from ..viz import _surface_plots as sp
+
+    hp = plots["highpass"]
+    valid = np.pad(np.isfinite(hp.z), 1, constant_values=False)
+    dist = ndimage.distance_transform_edt(valid, sampling=(hp.dy, hp.dx))[1:-1, 1:-1]
+    rim = 0.5 * HIGH_PASS_CUTOFF
+    shown = hp.replace(z=np.where(dist > rim, hp.z, np.nan))
+    what = " of the form error" if "profile" in plots else ""
+    return sp.plot_map(
+        shown, path, robust=0.5,
+        title=f"{1e-3 / HIGH_PASS_CUTOFF:g} mm^-1 high-pass{what}\n"
+        f"(a {rim * 1e6:.3g} um rim masked: filter end effect)")
+
+
+def _spectrum_figure(res, summary, plots, path):
+    """The PSD along the cut with every detected peak labelled (in mm^-1 and kHz).
+
+    ``summary.json`` lists the peaks above the high-pass cut-off; peaks below it
+    (attenuated by the filter, e.g. a tool mode on a slow facing cut) are found
+    the same way and drawn in grey in the shaded band.
+    """
+    import math
+
+    from ..metrology import find_peaks_spectrum
+    from ..report._simulation import PEAK_FMIN
+    from ..viz import _surface_plots as sp
+
+    freq, psd, peaks = plots["spectrum"]
+    speed = summary.get("surface_speed_m_per_s")
+    if speed is None and hasattr(res.spec.path, "angular_speed"):
+        f = res.spec.field
+        speed = res.spec.path.angular_speed * math.hypot(f.center_x, f.center_y)
+    low = [q for q in find_peaks_spectrum(freq, psd, n=5, fmax=PEAK_FMIN)
+           if q["freq_per_m"] < PEAK_FMIN]
+    return sp.plot_spectrum(
+        freq, psd, [*peaks, *low], path, speed=speed or None, fmin=PEAK_FMIN,
+        title="PSD along the cutting direction (y), peaks labelled")
+
+
+def _profile_figure(res, plots, path):
+    """The lenslet's centre profile along the cut (y) with the form error."""
+    from ..viz import _surface_plots as sp
+
+    y, z, fe = plots["profile"]
+    which = "simulated, as measured" if res.measured is not None else "simulated"
+    return sp.plot_profile_with_form_error(
+        y, z, fe["reference"], fe["error"], path,
+        xlabel="y, along the cut through the lenslet centre (\u00b5m)",
+        label=which, nominal_label="nominal at the air-cut amplitude",
+        title="Lenslet profile along the cutting direction and its form error")
 
 
 def _print_result(args, tp, res, summary, out) -> None:

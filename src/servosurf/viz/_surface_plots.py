@@ -66,7 +66,8 @@ def _unit(unit: str) -> float:
 
 
 def _draw_map(
-    fig: Any, ax: Any, surface: Surface, unit: str, title: str | None
+    fig: Any, ax: Any, surface: Surface, unit: str, title: str | None,
+    robust: float | None = None,
 ) -> None:
     scale = _unit(unit)
     ny, nx = surface.shape
@@ -87,6 +88,19 @@ def _draw_map(
     # true aspect unless the map is a thin strip, which would vanish
     aspect = "equal" if 0.1 <= height / width <= 10.0 else "auto"
     data = np.ma.masked_invalid(surface.z / scale)
+    vmin = vmax = None
+    extend = "neither"
+    label = f"height ({_UNIT_LABEL[unit]})"
+    if robust is not None and data.count() > 1:
+        vmin, vmax = np.percentile(data.compressed(), [robust, 100.0 - robust])
+        if not vmax > vmin:
+            vmin = vmax = None
+        else:
+            below = bool((data < vmin).any())
+            above = bool((data > vmax).any())
+            extend = {(True, True): "both", (True, False): "min",
+                      (False, True): "max"}.get((below, above), "neither")
+            label += f", colours {robust:g}-{100 - robust:g} percentile"
     im = ax.imshow(
         data,
         extent=extent,
@@ -94,13 +108,15 @@ def _draw_map(
         aspect=aspect,
         cmap="viridis",
         interpolation="nearest",
+        vmin=vmin,
+        vmax=vmax,
     )
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     if title:
         ax.set_title(title)
-    cb = fig.colorbar(im, ax=ax)
-    cb.set_label(f"height ({_UNIT_LABEL[unit]})")
+    cb = fig.colorbar(im, ax=ax, extend=extend)
+    cb.set_label(label)
 
 
 def plot_map(
@@ -110,6 +126,7 @@ def plot_map(
     title: str | None = None,
     unit: str = "nm",
     dpi: int = 120,
+    robust: float | None = None,
 ) -> Path:
     """Write a height map image with a colour bar to a PNG file.
 
@@ -125,6 +142,11 @@ def plot_map(
         Height unit of the colour bar.
     dpi : int, default: 120
         Resolution of the PNG, in dots per inch.
+    robust : float or None, default: None
+        Percentile p (0 <= p < 50): the colour scale spans the p-th to the
+        (100 - p)-th percentile of the valid heights, so that a few outliers (a
+        filter's rim artefact) do not set it; heights beyond are drawn in the end
+        colours and the colour bar shows arrows. None: the full range.
 
     Returns
     -------
@@ -134,16 +156,18 @@ def plot_map(
     Raises
     ------
     ConfigError
-        If ``unit`` is unknown.
+        If ``unit`` is unknown or ``robust`` is outside [0, 50).
 
     Notes
     -----
     Axes are in um when the map is calibrated, in pixels otherwise.
     """
     _unit(unit)
+    if robust is not None and not (0.0 <= float(robust) < 50.0):
+        raise ConfigError(f"robust must be a percentile in [0, 50), got {robust!r}")
     fig = _new_figure((6.0, 4.8))
     ax = fig.add_subplot()
-    _draw_map(fig, ax, surface, unit, title)
+    _draw_map(fig, ax, surface, unit, title, robust)
     return _save_atomic(fig, path, dpi)
 
 
@@ -213,6 +237,9 @@ def plot_profile_with_form_error(
     *,
     title: str | None = None,
     dpi: int = 120,
+    xlabel: str = "x (\u00b5m)",
+    label: str = "measured",
+    nominal_label: str = "nominal",
 ) -> Path:
     """Write a two-panel PNG: profile with its nominal, and the form error.
 
@@ -232,6 +259,12 @@ def plot_profile_with_form_error(
         Figure title.
     dpi : int, default: 120
         Resolution of the PNG, in dots per inch.
+    xlabel : str, default: "x (µm)"
+        Label of the position axis (name the axis the profile runs along).
+    label : str, default: "measured"
+        Legend entry of ``z`` (e.g. "simulated").
+    nominal_label : str, default: "nominal"
+        Legend entry of ``z_nominal``.
 
     Returns
     -------
@@ -252,10 +285,10 @@ def plot_profile_with_form_error(
     x, z, zn, e = arrays
     fig = _new_figure((7.0, 5.6))
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    ax1.plot(x * 1e6, z * 1e6, lw=1.0, label="measured")
-    ax1.plot(x * 1e6, zn * 1e6, lw=1.0, ls="--", label="nominal")
+    ax1.plot(x * 1e6, z * 1e6, lw=1.0, label=label)
+    ax1.plot(x * 1e6, zn * 1e6, lw=1.0, ls="--", label=nominal_label)
     ax1.set_ylabel("height (\u00b5m)")
-    ax1.legend(loc="best")
+    ax1.legend(loc="lower left", fontsize=8)
     ax2.plot(x * 1e6, e * 1e9, lw=1.0, color="C3")
     ax2.axhline(0.0, color="0.5", lw=0.5)
     if np.isfinite(e).any():
@@ -267,7 +300,7 @@ def plot_profile_with_form_error(
             textcoords="offset points",
             xytext=(5, 5),
         )
-    ax2.set_xlabel("x (\u00b5m)")
+    ax2.set_xlabel(xlabel)
     ax2.set_ylabel("form error (nm)")
     if title:
         fig.suptitle(title)
@@ -283,8 +316,9 @@ def plot_spectrum(
     speed: float | None = None,
     title: str | None = None,
     dpi: int = 120,
+    fmin: float | None = None,
 ) -> Path:
-    """Write a log-PSD plot against spatial frequency with labelled peaks.
+    """Write a log-PSD plot against spatial frequency with every peak labelled.
 
     Parameters
     ----------
@@ -294,7 +328,8 @@ def plot_spectrum(
         One-sided PSD, in m^3 (shown in nm^2 mm).
     peaks : sequence of dict
         Peaks from :func:`servosurf.metrology.find_peaks_spectrum` (uses
-        ``freq_per_m`` and ``psd_m3``); may be empty.
+        ``freq_per_m`` and ``psd_m3``); may be empty. Every one is marked and
+        labelled; labels of neighbouring peaks are staggered so they do not overlap.
     path : str or path-like
         Destination PNG file.
     speed : float or None, default: None
@@ -304,6 +339,9 @@ def plot_spectrum(
         Figure title.
     dpi : int, default: 120
         Resolution of the PNG, in dots per inch.
+    fmin : float or None, default: None
+        Spatial frequency in 1/m below which the map was high-pass filtered (the
+        band is shaded and named); peaks below it are drawn in grey.
 
     Returns
     -------
@@ -327,21 +365,39 @@ def plot_spectrum(
     fig = _new_figure((7.0, 4.4))
     ax = fig.add_subplot()
     ax.semilogy(f[keep] * 1e-3, p[keep] * 1e21, lw=1.0)
-    for pk in peaks:
+    if fmin is not None and keep.any():
+        ax.axvspan(0.0, fmin * 1e-3, color="0.9", zorder=0)
+        ax.text(0.5 * fmin * 1e-3, 0.02, f"high-passed\n< {fmin * 1e-3:g} mm\u207b\u00b9",
+                transform=ax.get_xaxis_transform(), ha="center", va="bottom",
+                fontsize=7, color="0.4")
+    span = float(np.ptp(f[keep])) if keep.any() else 1.0
+    last_x, level, level_max = -np.inf, 0, 0
+    for pk in sorted(peaks, key=lambda q: float(q["freq_per_m"])):
         fm = float(pk["freq_per_m"])
         pm = float(pk.get("psd_m3", np.interp(fm, f, p)))
         label = f"{fm * 1e-3:.0f} mm\u207b\u00b9"
         if speed is not None:
             label += f"\n{fm * speed * 1e-3:.2f} kHz"
-        ax.plot([fm * 1e-3], [pm * 1e21], "v", color="C3", ms=5)
+        # stagger labels of peaks closer than 8 % of the axis so none overlap
+        level = level + 1 if fm - last_x < 0.08 * span else 0
+        level_max = max(level_max, level % 3)
+        last_x = fm
+        colour = "0.45" if fmin is not None and fm < fmin else "C3"
+        ax.plot([fm * 1e-3], [pm * 1e21], "v", color=colour, ms=5)
         ax.annotate(
             label,
             (fm * 1e-3, pm * 1e21),
             textcoords="offset points",
-            xytext=(0, 8),
+            xytext=(0, 8 + 22 * (level % 3)),
             ha="center",
             fontsize=8,
+            color=colour if colour != "C3" else "black",
+            arrowprops={"arrowstyle": "-", "color": "0.6", "lw": 0.5}
+            if level % 3 else None,
         )
+    if peaks and keep.any():  # head room above the highest peak for the labels
+        lo, hi = ax.get_ylim()
+        ax.set_ylim(lo, hi * (hi / lo) ** (0.3 if level_max else 0.15))
     ax.set_xlabel("spatial frequency (mm\u207b\u00b9)")
     ax.set_ylabel("PSD (nm\u00b2 mm)")
     if title:
