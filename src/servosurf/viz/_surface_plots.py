@@ -367,9 +367,9 @@ def plot_spectrum(
     ax.semilogy(f[keep] * 1e-3, p[keep] * 1e21, lw=1.0)
     if fmin is not None and keep.any():
         ax.axvspan(0.0, fmin * 1e-3, color="0.9", zorder=0)
-        ax.text(0.5 * fmin * 1e-3, 0.02, f"high-passed\n< {fmin * 1e-3:g} mm\u207b\u00b9",
-                transform=ax.get_xaxis_transform(), ha="center", va="bottom",
-                fontsize=7, color="0.4")
+        band = f"high-passed\n< {fmin * 1e-3:g} mm\u207b\u00b9"
+        ax.text(0.5 * fmin * 1e-3, 0.02, band, transform=ax.get_xaxis_transform(),
+                ha="center", va="bottom", fontsize=7, color="0.4")
     span = float(np.ptp(f[keep])) if keep.any() else 1.0
     last_x, level, level_max = -np.inf, 0, 0
     for pk in sorted(peaks, key=lambda q: float(q["freq_per_m"])):
