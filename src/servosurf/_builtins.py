@@ -100,11 +100,12 @@ def resolve_file(source: str | Path, *, kind: str) -> Path:
         raise ConfigError(f"{kind} {str(source)!r}: is a folder, expected a TOML file")
     if name in builtins:
         raise ConfigError(
-            f"{kind} {str(source)!r}: no such file here; to use the built-in "
-            f"{kind} of that name give the name alone: {name}"
+            f"{kind} {str(source)!r} not found here; to use the built-in {kind} of "
+            f"that name give the name alone: {name}"
         )
     have = ", ".join(builtins) or "none"
     raise ConfigError(
-        f"{kind} {str(source)!r}: no such file and no built-in {kind} of that name "
-        f"(built-in {KINDS[kind]}: {have}; `servosurf toolpaths` lists them)"
+        f"{kind} {str(source)!r} not found: no such file and no built-in {kind} of "
+        f"that name (built-in {KINDS[kind]}: {have}; `servosurf toolpaths` lists "
+        "them)"
     )

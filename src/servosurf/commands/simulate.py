@@ -342,7 +342,7 @@ def _print_realisations(args, tp, study, out) -> None:
         ("form_error_max_m", "max form error", 1e9, "nm"),
         ("ra_m", "Ra", 1e9, "nm"),
         ("sa_m", "Sa", 1e9, "nm"),
-        ("peak1_per_m", "strongest spectral peak", 1e-3, "mm^-1"),
+        ("peak1_per_m", "strongest spectral line", 1e-3, "mm^-1"),
     ):
         st = stats.get(key)
         if st:
@@ -363,7 +363,7 @@ def _plot_realisations(study, path):
         ("form_error_max_m", "max form error [nm]", 1e9),
         ("ra_m", "Ra [nm]", 1e9),
         ("sa_m", "Sa [nm]", 1e9),
-        ("peak1_per_m", "strongest spectral peak [1/mm]", 1e-3),
+        ("peak1_per_m", "strongest spectral line (matched\nby frequency) [1/mm]", 1e-3),
     ]
     shown = [s for s in shown if np.isfinite(study.metrics[s[0]]).any()]
     fig, axes = figure(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)

@@ -107,7 +107,9 @@ def _draw_map(
         origin="upper",
         aspect=aspect,
         cmap="viridis",
-        interpolation="nearest",
+        # a map with more pixels than the PNG is low-pass filtered before it is
+        # resampled (no moire of the display's own decimation); smaller: nearest
+        interpolation="antialiased",
         vmin=vmin,
         vmax=vmax,
     )
@@ -116,6 +118,7 @@ def _draw_map(
     if title:
         ax.set_title(title)
     cb = fig.colorbar(im, ax=ax, extend=extend)
+    cb.formatter.set_useOffset(False)  # read heights directly, no "-4.999e3" offset
     cb.set_label(label)
 
 
