@@ -75,7 +75,8 @@ _SLIPS = {
 }
 
 
-def unit_slip(value: float, unit: str, low: float, high: float) -> str:
+def unit_slip(value: float, unit: str, low: float, high: float,
+              typical: float | None = None) -> str:
     """The likeliest unit slip that brings ``value`` into ``[low, high]``.
 
     Parameters
@@ -86,12 +87,15 @@ def unit_slip(value: float, unit: str, low: float, high: float) -> str:
         Its SI unit (``m``, ``Hz``, ``kg``, ...).
     low, high : float
         The plausible range, in ``unit``.
+    typical : float, optional
+        A typical value (the default), in ``unit``; default: the geometric middle
+        of the range.
 
     Returns
     -------
     str
-        E.g. ``"10 um (1e-05 m)"``, or "" when no usual unit fits. Among fitting
-        units the one landing nearest the middle of the range (on a log scale) wins.
+        E.g. ``"10 um = 1e-05 m"``, or "" when no usual unit fits. Among fitting
+        units the one landing nearest the typical value (on a log scale) wins.
 
     Examples
     --------
@@ -99,7 +103,10 @@ def unit_slip(value: float, unit: str, low: float, high: float) -> str:
     '10 um = 1e-05 m'
     """
     best, score = "", math.inf
-    mid = math.log10(math.sqrt(low * high)) if low > 0 and high > 0 else None
+    if typical is not None and typical > 0:
+        mid = math.log10(typical)
+    else:
+        mid = math.log10(math.sqrt(low * high)) if low > 0 and high > 0 else None
     for name, factor in _SLIPS.get(unit, ()):
         v = value * factor
         if low <= v <= high:
@@ -110,7 +117,8 @@ def unit_slip(value: float, unit: str, low: float, high: float) -> str:
 
 
 def check_plausible(value: float, /, *, name: str, unit: str, low: float,
-                    high: float, what: str = "") -> float:
+                    high: float, what: str = "",
+                    typical: float | None = None) -> float:
     """Refuse a finite but physically absurd value, naming the likely unit slip.
 
     Parameters
@@ -125,6 +133,9 @@ def check_plausible(value: float, /, *, name: str, unit: str, low: float,
         Plausible range, in ``unit``.
     what : str, optional
         What the value is (e.g. "zero-to-peak tool amplitude").
+    typical : float, optional
+        A typical value in ``unit``, to pick the likeliest slip (see
+        :func:`unit_slip`).
 
     Returns
     -------
@@ -139,7 +150,7 @@ def check_plausible(value: float, /, *, name: str, unit: str, low: float,
     v = check_finite(value, name=name)
     if low <= v <= high or (v == 0 and low <= 0):
         return v
-    slip = unit_slip(v, unit, low, high)
+    slip = unit_slip(v, unit, low, high, typical)
     hint = f"; values are SI ({unit}): did you mean {slip}?" if slip else ""
     desc = f" ({what})" if what else ""
     raise ConfigError(

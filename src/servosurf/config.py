@@ -103,7 +103,8 @@ def _type_name(tp: Any) -> str:
     return str(tp).replace("typing.", "")
 
 
-def _check_bounds(value: Any, meta: Mapping[str, Any], dotted: str) -> None:
+def _check_bounds(value: Any, meta: Mapping[str, Any], dotted: str,
+                  default: Any = None) -> None:
     if not isinstance(value, int | float) or isinstance(value, bool):
         return
     low, high = meta.get("low"), meta.get("high")
@@ -122,8 +123,10 @@ def _check_bounds(value: Any, meta: Mapping[str, Any], dotted: str) -> None:
     if plausible is not None:
         from ._validation import check_plausible
 
+        typical = default if isinstance(default, int | float) else None
         check_plausible(value, name=dotted, unit=unit, low=plausible[0],
-                        high=plausible[1], what=meta.get("doc") or "")
+                        high=plausible[1], what=meta.get("doc") or "",
+                        typical=typical)
 
 
 def _convert(value: Any, tp: Any, dotted: str) -> Any:
@@ -242,7 +245,7 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], *, prefix: str = "") -> 
             )
         f = fields[name]
         converted = _convert(value, hints[name], dotted)
-        _check_bounds(converted, f.metadata, dotted)
+        _check_bounds(converted, f.metadata, dotted, f.default)
         kwargs[name] = converted
     missing = [
         n

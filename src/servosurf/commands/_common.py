@@ -228,13 +228,13 @@ def discard_outputs() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-#: Plausible ranges of numeric flags: attribute -> (unit, low, high, what).
+#: Plausible ranges of numeric flags: attribute -> (unit, low, high, typical, what).
 FLAG_RANGES = {
-    "bandwidth": ("Hz", 1.0, 5e4, "open-loop crossover bandwidth"),
-    "bandwidths": ("Hz", 1.0, 5e4, "open-loop crossover bandwidth"),
-    "mass": ("kg", 1e-3, 50.0, "moving mass m1+m2"),
-    "radius": ("m", 1e-5, 1.0, "face radius"),
-    "pitch": ("m", 1e-9, 1e-3, "grid pitch"),
+    "bandwidth": ("Hz", 1.0, 5e4, 1448.0, "open-loop crossover bandwidth"),
+    "bandwidths": ("Hz", 1.0, 5e4, 1448.0, "open-loop crossover bandwidth"),
+    "mass": ("kg", 1e-3, 50.0, 0.175, "moving mass m1+m2"),
+    "radius": ("m", 1e-5, 1.0, 0.01, "face radius"),
+    "pitch": ("m", 1e-9, 1e-3, 1e-6, "grid pitch"),
 }
 
 
@@ -247,7 +247,7 @@ def check_flags(args) -> None:
     """
     from .._validation import check_plausible
 
-    for attr, (unit, low, high, what) in FLAG_RANGES.items():
+    for attr, (unit, low, high, typical, what) in FLAG_RANGES.items():
         value = getattr(args, attr, None)
         if value is None or isinstance(value, bool):
             continue
@@ -256,7 +256,8 @@ def check_flags(args) -> None:
             if not (math.isfinite(v) and v > 0):
                 raise _config_error(f"{flag} must be a positive {what} in {unit}, "
                                     f"got {v!r}")
-            check_plausible(v, name=flag, unit=unit, low=low, high=high, what=what)
+            check_plausible(v, name=flag, unit=unit, low=low, high=high, what=what,
+                            typical=typical)
 
 
 def fmt_length(value: float | None, unit: str = "nm", digits: int = 3) -> str:

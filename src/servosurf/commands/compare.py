@@ -21,7 +21,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--simulated", metavar="FILE", help="simulated map file")
     src.add_argument(
-        "--toolpath", metavar="T.toml", help="simulate this toolpath first"
+        "--toolpath", metavar="T", help="simulate this toolpath first (TOML file or "
+        "built-in name)"
     )
     p.add_argument("--machine", metavar="M.toml", help="machine for --toolpath")
     p.add_argument("--workpiece", metavar="W.toml", help="workpiece for --toolpath")
@@ -61,7 +62,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--no-register", action="store_true", help="do not register the maps"
     )
     p.add_argument(
-        "--out", metavar="DIR", default="results/compare", help="output directory"
+        "--out", metavar="DIR", default="results/compare",
+        help="output folder (default results/compare), replaced whole on success"
     )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     return p
@@ -75,8 +77,9 @@ def run(args) -> int:
     from ..report._compare import compare_surfaces
     from ..viz._common import figure, save
     from ..viz._surface_plots import plot_map
-    from ._common import out_dir, print_json, write_json
+    from ._common import check_flags, output_folder, print_json, write_json
 
+    check_flags(args)  # --bandwidth, --mass: positive and plausible
     with stage("reading maps"):
         measured = read_surface(args.measured)
         if args.simulated:
@@ -102,7 +105,7 @@ def run(args) -> int:
             register=not args.no_register,
         )
     plots = out.pop("_plots")
-    d = out_dir(args.out)
+    d = output_folder(args.out)  # swapped in place of --out at the end
     with stage("figures"):
         plot_map(
             plots["residual"],
@@ -142,4 +145,29 @@ def run(args) -> int:
     write_json(d / "compare.json", out)
     if args.json:
         print_json(out)
+    _print_result(args, out, d)
     return 0
+
+
+def _print_result(args, out, d) -> None:
+    """Residual, fit and correlation, the registration shift, matched peaks."""
+    from ._common import fmt_length, print_summary
+
+    rows = [
+        ("RMS / PV residual", f"{fmt_length(out['rms_residual_m'])} / "
+         f"{fmt_length(out['pv_residual_m'])} (after removing "
+         f"{', '.join(args.remove) or 'nothing'})"),
+        ("fit / correlation", f"{out['fit_percent']:.1f} % / "
+         f"{out['correlation']:.3f}"),
+    ]
+    shift = out.get("shift_m")
+    if shift:
+        rows.append(("registration shift", f"{shift[0] * 1e6:.3g} um in y, "
+                     f"{shift[1] * 1e6:.3g} um in x"))
+    matched = out.get("peaks_matched_per_m") or []
+    if matched:
+        rows.append(("matched peaks", ", ".join(
+            f"{a * 1e-3:.0f}/{b * 1e-3:.0f}" for a, b in matched)
+            + " mm^-1 (measured/simulated)"))
+    source = args.simulated or args.toolpath
+    print_summary(args, f"compare {args.measured} with {source}", rows, wrote=d)

@@ -331,7 +331,7 @@ def encode_x3p(surface: Surface) -> bytes:
         raise writer_error(
             "x3p",
             "the surface is laterally uncalibrated (dx or dy is None)",
-            "x3p needs pixel sizes in m; set dx and dy first",
+            "x3p needs pixel sizes in m and this map has none: write .datx or .npz",
         )
     ny, nx = surface.shape
     md = surface.metadata

@@ -218,7 +218,9 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
                 below = -(path.z.min() - z_floor)
                 raise ConfigError(
                     f"the deviation takes the tool {below:.3g} m below the commanded "
-                    f"depth plus depth_margin ({depth_margin:g} m); raise depth_margin"
+                    f"depth plus the {depth_margin:g} m margin: a vibration that "
+                    "large is implausible (servosurf face: check --bandwidth and "
+                    "--mass, or --no-vibration; Python: raise depth_margin)"
                 )
             prep = prepare_path(path, tool, field, rows=rows, cols=cols, crop=False)
             if prep is None:
