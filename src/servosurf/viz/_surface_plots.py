@@ -373,36 +373,95 @@ def plot_spectrum(
         band = f"high-passed\n< {fmin * 1e-3:g} mm\u207b\u00b9"
         ax.text(0.5 * fmin * 1e-3, 0.02, band, transform=ax.get_xaxis_transform(),
                 ha="center", va="bottom", fontsize=7, color="0.4")
-    span = float(np.ptp(f[keep])) if keep.any() else 1.0
-    last_x, level, level_max = -np.inf, 0, 0
+    notes = []
     for pk in sorted(peaks, key=lambda q: float(q["freq_per_m"])):
         fm = float(pk["freq_per_m"])
         pm = float(pk.get("psd_m3", np.interp(fm, f, p)))
         label = f"{fm * 1e-3:.0f} mm\u207b\u00b9"
         if speed is not None:
             label += f"\n{fm * speed * 1e-3:.2f} kHz"
-        # stagger labels of peaks closer than 8 % of the axis so none overlap
-        level = level + 1 if fm - last_x < 0.08 * span else 0
-        level_max = max(level_max, level % 3)
-        last_x = fm
-        colour = "0.45" if fmin is not None and fm < fmin else "C3"
-        ax.plot([fm * 1e-3], [pm * 1e21], "v", color=colour, ms=5)
-        ax.annotate(
-            label,
-            (fm * 1e-3, pm * 1e21),
-            textcoords="offset points",
-            xytext=(0, 8 + 22 * (level % 3)),
-            ha="center",
-            fontsize=8,
-            color=colour if colour != "C3" else "black",
-            arrowprops={"arrowstyle": "-", "color": "0.6", "lw": 0.5}
-            if level % 3 else None,
-        )
-    if peaks and keep.any():  # head room above the highest peak for the labels
-        lo, hi = ax.get_ylim()
-        ax.set_ylim(lo, hi * (hi / lo) ** (0.3 if level_max else 0.15))
-    ax.set_xlabel("spatial frequency (mm\u207b\u00b9)")
-    ax.set_ylabel("PSD (nm\u00b2 mm)")
+        below = fmin is not None and fm < fmin
+        ax.plot([fm * 1e-3], [pm * 1e21], "v", color="0.45" if below else "C3", ms=5)
+        notes.append(ax.annotate(
+            label, (fm * 1e-3, pm * 1e21), textcoords="offset points",
+            xytext=(0, 8), ha="center", va="bottom", fontsize=8,
+            color="0.45" if below else "black",
+            arrowprops={"arrowstyle": "-", "color": "0.6", "lw": 0.5,
+                        "shrinkA": 0, "shrinkB": 4},
+        ))
     if title:
         ax.set_title(title)
+    ax.set_xlabel("spatial frequency (mm\u207b\u00b9)")
+    ax.set_ylabel("PSD (nm\u00b2 mm)")
+    if notes:
+        _place_labels(fig, ax, notes)
     return _save_atomic(fig, path, dpi)
+
+
+def _place_labels(fig: Any, ax: Any, notes: list) -> None:
+    """Lay out peak labels so that none overlaps another and all stay in the axes.
+
+    Each label starts 8 points above its peak. Labels whose boxes would overlap
+    side by side form a group: the group's labels sit side by side at one height,
+    above the highest of their peaks, spread just enough not to touch and centred
+    on their peaks; a thin line joins each label to its peak, and since labels
+    keep the peaks' order and sit above them, the lines cross no label. When the
+    highest label ends above the axes, the log y range grows and the layout is
+    done again (at most four times).
+    """
+    from matplotlib.text import Text
+
+    scale = 72.0 / fig.dpi  # display pixels -> points
+    for _ in range(4):
+        for a in notes:
+            a.xyann = (0, 8)
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        items = []  # [peak x, peak y, width, height, bottom at rest]
+        for a in notes:
+            bb = Text.get_window_extent(a, r)
+            px, py = ax.transData.transform(a.xy)
+            items.append([px, py, bb.width, bb.height, bb.y0])
+        groups = [[k] for k in range(len(items))]
+        merged = True
+        while merged:  # merge groups whose boxes touch until none do
+            merged = False
+            boxes = [_group_box(items, g) for g in groups]
+            for a in range(len(groups)):
+                for b in range(a + 1, len(groups)):
+                    (l1, r1, b1, t1), (l2, r2, b2, t2) = boxes[a], boxes[b]
+                    if l1 < r2 + 2 and l2 < r1 + 2 and b1 < t2 + 2 and b2 < t1 + 2:
+                        groups[a] = sorted(groups[a] + groups.pop(b))
+                        merged = True
+                        break
+                if merged:
+                    break
+        top = -np.inf
+        for g in groups:
+            left, _, bottom, _ = _group_box(items, g)
+            x = left
+            for k in g:
+                px, py, w, h, rest = items[k]
+                cx = x + w / 2 if len(g) > 1 else px
+                x += w + 4.0
+                notes[k].xyann = ((cx - px) * scale, 8 + (bottom - rest) * scale)
+                top = max(top, bottom + h)
+        box = ax.get_window_extent(r)
+        if top <= box.y1 - 2:
+            return
+        lo, hi = ax.get_ylim()
+        need = (top - box.y0 + 6) / max(box.height, 1.0)  # axes heights
+        ax.set_ylim(lo, lo * (hi / lo) ** need)
+
+
+def _group_box(items: list, group: list) -> tuple[float, float, float, float]:
+    """Display box (left, right, bottom, top) of a label group laid side by side,
+    centred on its peaks, above the highest of them."""
+    if len(group) == 1:
+        px, _, w, h, rest = items[group[0]]
+        return px - w / 2, px + w / 2, rest, rest + h
+    total = sum(items[k][2] for k in group) + 4.0 * (len(group) - 1)
+    centre = float(np.mean([items[k][0] for k in group]))
+    bottom = max(items[k][4] for k in group)
+    height = max(items[k][3] for k in group)
+    return centre - total / 2, centre + total / 2, bottom, bottom + height
