@@ -14,6 +14,7 @@ import pytest
 
 from servosurf import _progress
 from servosurf.cli import main
+from servosurf.metrology import Surface
 
 REPO = Path(__file__).resolve().parents[2]
 LENS = REPO / "toolpaths" / "lenslet_5um.toml"
@@ -387,3 +388,18 @@ def test_interrupted_run_leaves_previous_results(fault, small_lens, tmp_path,
                  "--no-render", "--seed", "6"]) == 0
     assert json.loads((out / "summary.json").read_text())["settings"]["seed"] == 6
     assert sorted(os.listdir(tmp_path)) == sorted(["res", "small_lens.toml"])
+
+
+def test_compare_pixel_sizes_a_nanometre_apart():
+    """0.549 um (the interferometer model's pixel) against 0.55 um (the field):
+    resampled onto one grid, not refused (np.isclose's default atol of 1e-8 took
+    them for equal, and registration then refused the pair)."""
+    from servosurf.report._compare import compare_surfaces
+
+    y, x = np.mgrid[0:120, 0:160]
+    a = Surface(1e-9 * np.sin(2 * np.pi * x / 40.0), 0.549e-6, 0.549e-6)
+    b = Surface(1e-9 * np.sin(2 * np.pi * x * 0.549 / 0.55 / 40.0), 0.55e-6,
+                0.55e-6)
+    out = compare_surfaces(a, b)
+    assert out["pixel_m"] == [0.55e-6, 0.55e-6]
+    assert out["rms_residual_m"] < 0.1e-9  # the same sine on both grids

@@ -30,7 +30,7 @@ def readme_commands(text: str) -> list[tuple[str, int]]:
     """``(command, expected exit status)`` of every command in the README's ``sh``
     blocks: lines starting with ``servosurf`` or ``python -c``; a trailing
     ``# exit N`` comment sets the expected status (default 0)."""
-    out = []
+    out: list[tuple[str, int]] = []
     for block in re.findall(r"^```sh\n(.*?)^```", text, flags=re.M | re.S):
         for line in block.splitlines():
             line = line.strip()
@@ -41,7 +41,8 @@ def readme_commands(text: str) -> list[tuple[str, int]]:
             if m:
                 status = int(m.group(1))
                 line = line[: m.start()]
-            out.append((line, status))
+            if (line, status) not in out:  # a command shown twice runs once
+                out.append((line, status))
     return out
 
 
