@@ -130,11 +130,21 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "_run", None) is None:
         parser.print_help(sys.stderr)
         return 1
+    import warnings
+
     from . import _progress
 
     quiet_before = _progress.is_quiet()
     if args.quiet:
         _progress.set_quiet(True)
+    show_before = warnings.showwarning
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        # a warning is one line naming the command, not a source file and line
+        print(f"servosurf {args.command}: warning: {message}", file=sys.stderr,
+              flush=True)
+
+    warnings.showwarning = one_line
     status = 1
     try:
         status = int(args._run(args) or 0)
@@ -166,6 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         discard_outputs()  # after a commit there is nothing left to discard
         _progress.set_quiet(quiet_before)
+        warnings.showwarning = show_before
 
 
 if __name__ == "__main__":  # pragma: no cover

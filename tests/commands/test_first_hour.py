@@ -403,3 +403,22 @@ def test_compare_pixel_sizes_a_nanometre_apart():
     out = compare_surfaces(a, b)
     assert out["pixel_m"] == [0.55e-6, 0.55e-6]
     assert out["rms_residual_m"] < 0.1e-9  # the same sine on both grids
+
+
+def test_warnings_are_one_line(small_lens, tmp_path, capsys):
+    """A ToolpathWarning reads as one line naming the command, not a source line."""
+    import warnings
+
+    text = small_lens.read_text()
+    assert "clearance-angle-deg = 15.0" in text
+    sharp = tmp_path / "sharp.toml"  # 5 degree clearance: the 8.4 degree slope rubs
+    sharp.write_text(text.replace("clearance-angle-deg = 15.0",
+                                  "clearance-angle-deg = 5.0"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert main(["-q", "simulate", str(sharp), "--out", str(tmp_path / "w"),
+                     "--no-render"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err and all(line.startswith("servosurf simulate: warning: toolpath "
+                                       "slope") for line in err)
+    assert not any(".py:" in line for line in err)
