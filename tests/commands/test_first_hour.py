@@ -113,6 +113,11 @@ def test_paper_surface_rows_from_any_folder(tmp_path, monkeypatch):
     with pytest.raises(_Found):
         _paper.surface_rows({})
     assert calls[0].is_file() and calls[0].read_bytes() == LENS.read_bytes()
+    from servosurf.toolpath import builtin_toolpaths
+
+    # the package's own data (what a wheel ships), not a folder found by walking
+    # up from the module (which exists only in a source checkout)
+    assert calls[0].parent == builtin_toolpaths()["lenslet_5um"].parent
 
 
 # ------------------------------------------------------ refuse nonsense early
