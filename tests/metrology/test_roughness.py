@@ -17,8 +17,9 @@ from servosurf.metrology import (
     profile_roughness,
 )
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
-NEXVIEW_CSV = SHARED / "data" / "zygo" / "nexview_nx2_diamond_turned_1016-WLI-2D.csv"
+#: The NexView profile in the shared data folder (``$SERVOSURF_SHARED/data/zygo``
+#: or ``../shared/data/zygo``, see ``tests/conftest.py``).
+NEXVIEW_NAME = "nexview_nx2_diamond_turned_1016-WLI-2D.csv"
 
 #: Relative tolerance on the NexView reference values (brief: 0.5 %).
 NEXVIEW_RTOL = 5e-3
@@ -48,10 +49,11 @@ def read_mx_profile_csv(path: Path) -> Profile:
 
 
 @pytest.fixture(scope="module")
-def nexview() -> Profile:
-    if not NEXVIEW_CSV.is_file():
-        pytest.skip(f"shared measurement data not found at {NEXVIEW_CSV}")
-    return read_mx_profile_csv(NEXVIEW_CSV)
+def nexview(zygo_dir) -> Profile:
+    path = zygo_dir / NEXVIEW_NAME  # zygo_dir honours SERVOSURF_SHARED, or skips
+    if not path.is_file():
+        pytest.skip(f"shared measurement data not found at {path}")
+    return read_mx_profile_csv(path)
 
 
 def test_nexview_file_is_parsed(nexview):

@@ -180,3 +180,57 @@ def test_loop_bode_holds_the_open_loop(monkeypatch, tmp_path):
     assert margins["crossover_hz"] == pytest.approx(468.0, rel=0.01)
     notes = [t.get_text() for t in figs[0].axes[1].texts]
     assert any("crossover 468 Hz" in t and "phase margin" in t for t in notes)
+
+
+def test_highpass_figure_masks_the_filter_rim(monkeypatch, tmp_path):
+    """simulate's high-pass picture drops the band within half a cut-off of the
+    map's edge (the Gaussian filter's end effect) and keeps the rest."""
+    from servosurf.commands import simulate as cmd
+    from servosurf.report._simulation import HIGH_PASS_CUTOFF
+
+    shown = {}
+
+    def keep(surface, path, **kw):
+        shown["surface"], shown["kw"] = surface, kw
+        return path
+
+    monkeypatch.setattr(sp, "plot_map", keep)
+    n, dx = 201, 0.55e-6
+    y, x = (np.mgrid[0:n, 0:n] - n // 2) * dx
+    r = np.hypot(x, y)
+    z = np.where(r < 50e-6, 1e-10 * np.sin(x / 2e-6), np.nan)  # a lenslet's disc
+    z[(r > 45e-6) & (r < 50e-6)] = -14e-9  # a rim artefact, 5 um wide
+    cmd._highpass_figure({"highpass": Surface(z, dx, dx)}, tmp_path / "h.png")
+    out = shown["surface"].z
+    rim = 0.5 * HIGH_PASS_CUTOFF  # 6.25 um: the artefact band lies inside it
+    assert np.all(np.isnan(out[r > 50e-6 - rim + dx]))
+    inner = r < 50e-6 - rim - dx
+    np.testing.assert_array_equal(out[inner], z[inner])
+    assert shown["kw"]["robust"] == 0.5 and "rim masked" in shown["kw"]["title"]
+
+
+def test_face_zarr_carries_grid_metadata(tmp_path, capsys):
+    """face.zarr attributes: unit, pixel size, origin; summary Sq over every pixel."""
+    import json
+
+    zarr = pytest.importorskip("zarr")
+    from servosurf.cli import main
+
+    out = tmp_path / "face"
+    assert main(["face", "flat_facing", "--radius", "60e-6", "--pitch", "2e-6",
+                 "--chunk", "32", "--no-vibration", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    arr = zarr.open_array(str(out / "face.zarr"), mode="r")
+    a = dict(arr.attrs)
+    # face_field: 2 ceil(r / pitch) + 1 = 61 pixels, centred on the axis
+    assert arr.shape == (61, 61)
+    assert a["unit"] == "m" and a["dx_m"] == a["dy_m"] == 2e-6
+    assert a["x0_m"] == pytest.approx(-60e-6, abs=1e-15)  # 1 fm
+    assert a["y0_m"] == pytest.approx(-60e-6, abs=1e-15)
+    assert a["axes"] == ["y", "x"] and a["face_radius_m"] == 60e-6
+    z = np.asarray(arr[:])
+    v = z[np.isfinite(z)]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["face_sq_m"] == pytest.approx(v.std(), rel=1e-6)
+    assert f"{v.std() * 1e9:.3g} nm" in text and "Sq (whole face)" in text
+    assert summary["zarr"] == str(out / "face.zarr")
