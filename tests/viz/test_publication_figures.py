@@ -174,6 +174,12 @@ def test_loop_bode_holds_the_open_loop(monkeypatch, tmp_path):
     line = ax.get_lines()[0]
     assert "open loop" in line.get_label()
     mag = np.asarray(line.get_ydata())
+    # the open loop, not a closed-loop response: integral action makes |L| large
+    # well below the crossover (|T| and the disturbance FRFs stay near or below
+    # 0 dB there), and it rolls off far above it
+    assert mag[0] > 15.0 and mag[-1] < -40.0
+    np.testing.assert_allclose(mag, 20 * np.log10(np.abs(loop.loop_gain(f))),
+                               rtol=0, atol=1e-9)  # dB
     # 0 dB at the crossover the margins name (open-loop crossover bandwidth)
     k = np.nonzero((mag[:-1] >= 0) & (mag[1:] < 0))[0][0]
     assert f[k] <= margins["crossover_hz"] <= f[k + 1]
