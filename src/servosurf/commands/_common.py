@@ -332,7 +332,7 @@ def dask_client(scheduler: str | None, workers: int = 2):
         if workers < 1:
             raise ConfigError(f"--workers must be >= 1, got {workers}")
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
-                               processes=True, dashboard_address=None)
+                               processes=True, dashboard_address=":0")  # any free port
         client = Client(cluster)
     else:
         cluster = None
