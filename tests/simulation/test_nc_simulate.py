@@ -176,8 +176,9 @@ def test_cli_nc_flags_refused_for_other_kinds(capsys, tmp_path):
     assert main(["simulate", "toolpaths/flat_facing.toml", "--spindle-rpm", "30",
                  "--out", str(tmp_path / "o")]) == 1
     assert "--spindle-rpm applies to NC programs" in capsys.readouterr().err
-    # one time base at most (argparse usage error)
-    assert main(["simulate", "x.nc", "--spindle-rpm", "30", "--block-time", "1"]) == 2
+    # one time base at most (argparse usage error: one line, exit 1)
+    assert main(["simulate", "x.nc", "--spindle-rpm", "30", "--block-time", "1"]) == 1
+    assert "not allowed with argument" in capsys.readouterr().err
 
 
 def test_cli_small_program_through_python_m(tmp_path):

@@ -41,7 +41,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--simulated", metavar="FILE", help="simulated map or profile file"
     )
     src.add_argument(
-        "--toolpath", metavar="T.toml", help="simulate this toolpath first"
+        "--toolpath", metavar="T", help="simulate this toolpath first (TOML file or "
+        "built-in name)"
     )
     p.add_argument("--machine", metavar="M.toml", help="machine for --toolpath")
     p.add_argument("--workpiece", metavar="W.toml", help="workpiece for --toolpath")
@@ -156,7 +157,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "both are measurements)",
     )
     p.add_argument(
-        "--out", metavar="DIR", default="results/compare", help="output directory"
+        "--out", metavar="DIR", default="results/compare",
+        help="output folder (default results/compare), replaced whole on success"
     )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     return p
@@ -166,7 +168,9 @@ def run(args) -> int:
     from .._progress import stage
     from ..io import read_any
     from ..report._profile_compare import as_profile_or_none
+    from ._common import check_flags
 
+    check_flags(args)  # --bandwidth, --mass: positive and plausible
     with stage("reading"):
         measured, _ = read_any(args.measured)
         if args.simulated:
@@ -220,7 +224,7 @@ def _run_profiles(args, measured, simulated) -> int:
     from .._progress import stage
     from .._validation import check_positive
     from ..report._profile_compare import compare_profiles
-    from ._common import out_dir, print_json, write_json
+    from ._common import output_folder, print_json, write_json
 
     cutoff = None if args.cutoff is None else check_positive(
         args.cutoff, name="--cutoff")
@@ -241,7 +245,7 @@ def _run_profiles(args, measured, simulated) -> int:
             form=args.form,
             labels=tuple(args.labels),
         )
-    d = out_dir(args.out)
+    d = output_folder(args.out)  # swapped in place of --out at the end
     with stage("figures"):
         files = res.plot(d)
     out = res.to_dict()
@@ -250,9 +254,11 @@ def _run_profiles(args, measured, simulated) -> int:
     out["files"] = {k: str(v) for k, v in files.items()}
     out["files"]["json"] = str(d / "compare.json")
     write_json(d / "compare.json", out)
+    from .._progress import is_quiet
+
     if args.json:
         print_json(out)
-    else:
+    elif not is_quiet():
         _print_profiles(out)
     return 0
 
@@ -302,7 +308,7 @@ def _run_maps(args, measured, simulated) -> int:
     from ..report._compare import compare_surfaces
     from ..viz._common import figure, save
     from ..viz._surface_plots import plot_map
-    from ._common import out_dir, print_json, write_json
+    from ._common import output_folder, print_json, write_json
 
     with stage("registration and residual"):
         out = compare_surfaces(
@@ -313,7 +319,7 @@ def _run_maps(args, measured, simulated) -> int:
             register=not args.no_register,
         )
     plots = out.pop("_plots")
-    d = out_dir(args.out)
+    d = output_folder(args.out)  # swapped in place of --out at the end
     with stage("figures"):
         plot_map(
             plots["residual"],
@@ -353,4 +359,29 @@ def _run_maps(args, measured, simulated) -> int:
     write_json(d / "compare.json", out)
     if args.json:
         print_json(out)
+    _print_result(args, out, d)
     return 0
+
+
+def _print_result(args, out, d) -> None:
+    """Residual, fit and correlation, the registration shift, matched peaks."""
+    from ._common import fmt_length, print_summary
+
+    rows = [
+        ("RMS / PV residual", f"{fmt_length(out['rms_residual_m'])} / "
+         f"{fmt_length(out['pv_residual_m'])} (after removing "
+         f"{', '.join(args.remove) or 'nothing'})"),
+        ("fit / correlation", f"{out['fit_percent']:.1f} % / "
+         f"{out['correlation']:.3f}"),
+    ]
+    shift = out.get("shift_m")
+    if shift:
+        rows.append(("registration shift", f"{shift[0] * 1e6:.3g} um in y, "
+                     f"{shift[1] * 1e6:.3g} um in x"))
+    matched = out.get("peaks_matched_per_m") or []
+    if matched:
+        rows.append(("matched peaks", ", ".join(
+            f"{a * 1e-3:.0f}/{b * 1e-3:.0f}" for a, b in matched)
+            + " mm^-1 (measured/simulated)"))
+    source = args.simulated or args.toolpath
+    print_summary(args, f"compare {args.measured} with {source}", rows, wrote=d)

@@ -29,7 +29,7 @@ def run(args) -> int:
     from .._progress import stage
     from ..report import GROUPS, paper_table
     from ..servo import load_machine
-    from ._common import out_dir, print_json, write_json
+    from ._common import output_folder, print_json, write_json
 
     if args.only:
         bad = [g for g in args.only if g not in GROUPS]
@@ -46,7 +46,7 @@ def run(args) -> int:
         progress=lambda n: stage(f"paper rows: {n}"),
     )
     if args.out:
-        write_json(out_dir(args.out) / "paper.json", table)
+        write_json(output_folder(args.out) / "paper.json", table)
     if args.json:
         print_json(table)
     else:

@@ -119,8 +119,9 @@ def psd_1d(
     use &= nan_frac < 1.0
     if not use.any():
         raise ConfigError(
-            f"every profile has more than {max_nan_fraction:.0%} invalid samples; "
-            "raise max_nan_fraction or crop the map"
+            f"every profile of the map has more than {max_nan_fraction:.0%} invalid "
+            "samples (it is mostly dropouts): crop the map to its valid region or "
+            "use a measurement with fewer dropouts"
         )
     data = np.array([_fill_nan_1d(r) for r in rows[use]])
     win = "boxcar" if window is None else window

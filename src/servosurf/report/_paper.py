@@ -270,12 +270,10 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     from ._simulation import analyse
 
     machine = ctx.get("machine")
-    here = Path(__file__).resolve()
-    tp_dir = ctx.get("toolpaths") or next(
-        (p / "toolpaths" for p in here.parents if (p / "toolpaths").is_dir()), None
-    )
-    if tp_dir is None:
-        return [], ["surface rows skipped: toolpaths/ folder not found"]
+    from ..toolpath import builtin_toolpaths
+
+    # the built-in toolpaths ship with the package: found from any folder
+    tp_dir = Path(ctx.get("toolpaths") or builtin_toolpaths()["lenslet_5um"].parent)
     rows: list[Row] = []
     notes: list[str] = []
     reported = ctx.setdefault("reported", [])
