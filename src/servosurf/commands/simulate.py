@@ -189,8 +189,12 @@ def _nc_overrides(args) -> dict:
     }
 
 
-def load_spec(args):
-    """The toolpath spec of the positional argument (TOML or NC program)."""
+def load_spec(args, edge=None):
+    """The toolpath spec of the positional argument (TOML or NC program).
+
+    ``edge``: the measured tool edge of ``--tool`` (its fitted radius stands in for
+    ``--tool-radius``; the simulation hook then swaps the whole edge in).
+    """
     import dataclasses
     from pathlib import Path
 
@@ -201,8 +205,9 @@ def load_spec(args):
     if not tp.is_file():
         raise ConfigError(f"{tp}: toolpath file not found")
     nc = _nc_overrides(args)
+    radius = args.tool_radius if edge is None else edge.radius
     if tp.suffix.lower() == ".toml":
-        spec = load_toolpath(tp, nose_radius=args.tool_radius, nc_overrides=nc)
+        spec = load_toolpath(tp, nose_radius=radius, nc_overrides=nc)
         if spec.kind != "nc":
             given = [f"--{k.replace('_', '-')}" for k in
                      ("spindle_rpm", "block_time", "feed_per_rev", "reference",
@@ -216,7 +221,7 @@ def load_spec(args):
                     spec, tool=dataclasses.replace(spec.tool,
                                                    nose_radius=args.tool_radius))
         return spec
-    tool = None if args.tool_radius is None else Tool(nose_radius=args.tool_radius)
+    tool = None if radius is None else Tool(nose_radius=radius)
     return nc_spec(tp, tool=tool, **{k: v for k, v in nc.items() if v is not None})
 
 
@@ -255,7 +260,8 @@ def run(args) -> int:
     if args.realisations < 1:
         raise ConfigError(f"--realisations must be >= 1, got {args.realisations}")
     tp = Path(args.toolpath)
-    spec = load_spec(args)
+    edge = _measured_edge(args)
+    spec = load_spec(args, edge)
     fmt = args.format or "datx"
     instrument = args.instrument or ("none" if spec.kind == "nc" else "cp300-20x")
     settings = {  # the paper's cutting set-up unless given
@@ -266,13 +272,16 @@ def run(args) -> int:
         "parts": None if args.parts is None else tuple(args.parts),
         "instrument": None if instrument == "none" else instrument,
     }
-    edge = _measured_edge(args, settings)
+    if edge is not None:
+        from ..toolpath import MeasuredEdge
+
+        settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
     if args.realisations > 1:
         out = out_dir(args.out or Path("results") / tp.stem)
         return _run_realisations(args, spec, tp, out, settings)
     res = simulate(spec, seed=args.seed, **settings)
     if spec.kind == "nc":
-        return _finish_nc(args, res, tp, fmt)
+        return _finish_nc(args, res, tp, fmt, edge)
     out = out_dir(args.out or Path("results") / tp.stem)
     with stage("analysis"):
         summary = analyse(res)
@@ -358,22 +367,20 @@ def run(args) -> int:
     return 0
 
 
-def _measured_edge(args, settings):
-    """``--tool EDGE``: fit the trace and add the hook that swaps the tool in."""
+def _measured_edge(args):
+    """``--tool EDGE``: the fitted trace (None without --tool)."""
     from ..errors import ConfigError
 
     if not args.tool:
         if args.edge_compensated:
             raise ConfigError("--edge-compensated needs --tool EDGE (a measured edge)")
         return None
-    from ..toolpath import MeasuredEdge, read_tool_edge
+    from ..toolpath import read_tool_edge
 
-    edge = read_tool_edge(args.tool)
-    settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
-    return edge
+    return read_tool_edge(args.tool)
 
 
-def _finish_nc(args, res, tp, fmt) -> int:
+def _finish_nc(args, res, tp, fmt, edge=None) -> int:
     """Analysis, map, figures and summary of an NC-program run."""
     from pathlib import Path
 
@@ -395,6 +402,10 @@ def _finish_nc(args, res, tp, fmt) -> int:
             from ..viz._mesh import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
+        if edge is not None:
+            files["tool_edge_png"] = str(edge.plot(out / "tool_edge.png"))
+            summary["tool_edge"] = {**edge.summary(),
+                                    "compensated": bool(args.edge_compensated)}
     summary.update(settings=res.settings, files=files, input_file=str(tp))
     write_json(out / "summary.json", summary)
     if args.json:
