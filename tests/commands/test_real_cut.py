@@ -131,3 +131,21 @@ def test_contour_against_the_simulated_band(band, capsys):
     assert res["correlation"] > 0.8
     one = _compare(band, capsys, CONTOUR, "--x-range", *CUT_ZONE, "--split", "no")
     assert res["correlation"] > one["correlation"] + 0.2
+
+
+def test_example_toolpath_files_hold_the_documented_settings():
+    # examples/real_cut/*.toml find the program through ../shared next to the repo
+    import servosurf.toolpath as tp
+    from tests.conftest import REPO, SHARED
+
+    if not PROGRAM.is_file() or SHARED.resolve() != (REPO.parent / "shared").resolve():
+        pytest.skip("the example files expect the shared data at <repo>/../shared")
+    spec = tp.load_toolpath(REPO / "examples" / "real_cut" / "1022.toml")
+    assert spec.kind == "nc" and spec.tool.nose_radius == 189.36e-6
+    assert not spec.tool.has_waviness
+    d = spec.path.describe()
+    assert d["time_base"] == "0.001 s per cutting block (given)"
+    assert (d["reference"], d["rotation"]) == ("tip", "ccw")
+    edge = tp.load_toolpath(REPO / "examples" / "real_cut" / "1022-edge.toml")
+    assert edge.tool.has_waviness
+    assert abs(edge.tool.nose_radius - 188.3e-6) < 0.1e-6  # the trace's own fit

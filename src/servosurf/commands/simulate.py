@@ -138,8 +138,11 @@ def _add_nc_args(p) -> None:
         "toolpath's tool; writes tool_edge.png")
     tool.add_argument(
         "--edge-compensated", action="store_true",
-        help="with --tool: the path already compensates this measured edge, so "
-        "only its fitted radius enters the sweep (not its deviation)")
+        help="with --tool: the radius-only model, a round nose of the trace's "
+        "fitted radius without the edge's shape. Not needed for a program that "
+        "compensates the edge: the compensation is in the program's Z and the "
+        "cusps are still imprints of the edge's shape, which --tool sweeps by "
+        "default (evidence: benchmarks/real_cut_1022.py)")
 
 
 def _check_cli_values(args) -> None:
