@@ -435,3 +435,23 @@ def test_cli_split_keys_and_flag(tmp_path, capsys):
     assert main(argv[:-1] + ["--out", str(tmp_path / "c")]) == 0
     text = capsys.readouterr().out
     assert "split at axis  axis at 413.70 um" in text
+
+
+def test_axis_search_does_not_rely_on_the_whole_profile_registration():
+    # on case 1022 with the measured edge swept, one shift for the whole WLI
+    # profile lands 0.6 mm away from the axis; the search over axis positions on
+    # the measured profile must still find it. Here the whole-profile guesses
+    # handed to it are wrong on purpose.
+    from servosurf.metrology import profile_through
+    from servosurf.report._profile_compare import _split_search
+
+    f = texture(15)
+    axis, delta = 0.4137e-3, 5.3e-6
+    meas = _through_centre(f, axis, delta, 20e-6, 1800)
+    sim = profile_through(_band(f))
+    found = _split_search(meas, meas, sim, 0.08e-3, "auto", None,
+                          {False: axis + 0.3e-3, True: -0.2e-3})
+    assert found is not None and found["below"] and found["above"]
+    assert abs(found["axis_m"] - axis) < SHIFT_TOL_STEPS * DX
+    assert abs(found["below"]["shift_m"] - (axis + delta)) < SHIFT_TOL_STEPS * DX
+    assert found["score"] > 0.99

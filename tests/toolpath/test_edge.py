@@ -385,6 +385,12 @@ def test_cli_nc_program_with_a_measured_edge_needs_no_radius(synthetic, tmp_path
     ra_round = runs["round"]["ra_m"]
     assert ra_round == pytest.approx(4 * h / (9 * math.sqrt(3)), rel=0.02)
     assert abs(out["ra_m"] / ra_round - 1) > 0.03
+    # the same as a toolpath file of kind nc: the trace gives the radius
+    (tmp_path / "p.toml").write_text(
+        'kind = "nc"\n[nc]\nprogram = "p.nc"\nblock-time = 1e-3\n'
+        '[tool]\nedge-trace = "edge.csv"\n')
+    spec = tp.load_toolpath(tmp_path / "p.toml")
+    assert abs(spec.tool.nose_radius - R0) < POS_TOL and spec.tool.has_waviness
 
 
 def test_cli_tool_edge_writes_a_reusable_waviness_csv(synthetic, tmp_path, capsys):
