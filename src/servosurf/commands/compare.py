@@ -220,6 +220,7 @@ def _reject_profile_flags(args) -> None:
             ("--cutoff", args.cutoff),
             ("--at", args.at),
             ("--max-shift", args.max_shift),
+            ("--split", None if args.split == "auto" else args.split),
         )
         if value is not None
     ]
