@@ -48,16 +48,15 @@ with one shift). The halves are therefore registered separately; their mean
 shift is the position of the spindle axis on the measured profile (reported as
 ``shift``), half their difference the azimuthal offset. The split is made when
 the simulated side is a line through the spindle axis of a servosurf simulation
-(a map whose metadata
-holds ``simulation``, its line through y = 0 or x = 0 and crossing the axis;
-``split="auto"``). The axis position is searched: candidates are the
-whole-profile registration and a grid over the measured profile (half an RSm
-apart); at each, every half holding at least :data:`SPLIT_MIN_WINDOWS` RSm of
-valid samples is registered against its side of the simulated line within one
-RSm of the candidate, and the candidate whose halves correlate best
-(length-weighted) wins, in either orientation with ``mirror="auto"``. A measured
-profile with less than that on one side of the axis gets the shift of its
-longer half.
+(a map whose metadata holds ``simulation``, its line through y = 0 or x = 0
+and crossing the axis; ``split="auto"``). The axis position is searched:
+candidates are the whole-profile registration and a grid over the measured
+profile (half an RSm apart); at each, every half holding at least
+:data:`SPLIT_MIN_WINDOWS` RSm of valid samples is registered against its side of
+the simulated line within one RSm of the candidate, and the candidate whose
+halves correlate best (length-weighted) wins, in either orientation with
+``mirror="auto"``. A measured profile with less than that on one side of the
+axis gets the shift of its longer half.
 """
 
 from __future__ import annotations
