@@ -176,12 +176,13 @@ def plot_profile_table(
     for key, name, fmt in (("ra_m", "Ra", _fmt_nm), ("rq_m", "Rq", _fmt_nm),
                            ("rz_m", "Rz", _fmt_nm), ("rsm_m", "RSm", _fmt_um)):
         rows.append((name, fmt(rm[key]), fmt(rs[key]), _fmt_pct(rm[key], rs[key])))
-    fig = _new_figure((6.4, 3.6))
+    fig = _new_figure((6.4, 3.2))
     ax = fig.add_subplot()
     ax.axis("off")
     tab = ax.table(cellText=rows, colLabels=("", lm, ls, f"{ls} vs {lm}"),
-                   loc="upper center", cellLoc="center")
-    tab.scale(1.0, 1.5)
+                   cellLoc="center", bbox=(0.0, 0.34, 1.0, 0.66))
+    tab.auto_set_font_size(False)
+    tab.set_fontsize(9)
     split = result.info.get("split")
     lines = [
         f"\u03bbc {result.cutoff * 1e3:g} mm ({result.cutoff_rule}), ends trimmed "
@@ -200,7 +201,7 @@ def plot_profile_table(
     elif result.info.get("registered", True):
         lines.append(f"shift {result.shift * 1e6:.1f} \u00b5m"
                      + (", mirrored" if result.mirrored else ""))
-    ax.text(0.5, 0.02, "\n".join(lines), ha="center", va="bottom", fontsize=8,
+    ax.text(0.5, 0.28, "\n".join(lines), ha="center", va="top", fontsize=8,
             transform=ax.transAxes)
     ax.set_title(f"Roughness, {lm} and {ls} (ISO 4287, same cut-off and span)",
                  fontsize=10)
