@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import argparse
 
+#: Below this correlation after registration the text output adds a hint.
+LOW_CORRELATION = 0.5
+
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -27,8 +30,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "along it (shift, and a mirror x -> -x if it correlates better), mask "
         "invalid ends, and report Ra, Rq, Rz, RSm of both with the same ISO 4288 "
         "cut-off, form removal and end trimming, the correlation after "
-        "registration, and overlay and spectrum figures. Text output in nm/um, "
-        "--json in SI units (m).",
+        "registration, and overlay, roughness-table and spectrum figures; a "
+        "profile through the centre of a turned part against the band of an NC "
+        "run is registered half by half either side of the spindle axis. Text "
+        "output in nm/um, --json in SI units (m).",
     )
     p.add_argument(
         "measured",
@@ -135,6 +140,16 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "it correlates better), yes or no (default auto)",
     )
     prof.add_argument(
+        "--split",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="register the halves of the measured profile on either side of the "
+        "spindle axis separately (a spiral's grooves shift in opposite directions "
+        "on the two sides of a profile through the centre): auto (when the "
+        "simulated map is a servosurf simulation whose line crosses the axis, "
+        "e.g. the band of an NC run), yes or no (default auto)",
+    )
+    prof.add_argument(
         "--max-shift",
         metavar="M",
         type=float,
@@ -209,6 +224,7 @@ def _reject_profile_flags(args) -> None:
             ("--cutoff", args.cutoff),
             ("--at", args.at),
             ("--max-shift", args.max_shift),
+            ("--split", None if args.split == "auto" else args.split),
         )
         if value is not None
     ]
@@ -244,6 +260,7 @@ def _run_profiles(args, measured, simulated) -> int:
             max_shift=max_shift,
             form=args.form,
             labels=tuple(args.labels),
+            split={"auto": "auto", "yes": True, "no": False}[args.split],
         )
     d = output_folder(args.out)  # swapped in place of --out at the end
     with stage("figures"):
@@ -275,6 +292,15 @@ def _print_profiles(out: dict) -> None:
               f"(x_{lm} = {'-' if out['mirrored'] else ''}x_{ls} + shift)")
     else:
         print("  registration   none (positions taken as they are)")
+    if out.get("split_at_axis"):
+        sb, sa = (out["half_shifts_m"][k] * um for k in ("below", "above"))
+        cb, ca = (out["half_correlations"][k] for k in ("below", "above"))
+        fc = " / ".join("n/a" if c is None else f"{c:.3f}" for c in (cb, ca))
+        print(f"  split at axis  axis at {out['axis_position_m'] * um:.2f} um of the "
+              f"{lm} profile; half shifts {sb:.2f} / {sa:.2f} um, correlations "
+              f"{fc} (below / above the axis)")
+    elif out.get("split_skipped"):
+        print(f"  split at axis  not split: {out['split_skipped']}")
     ends = (f"ends trimmed by {out['trim_length_m'] * um:g} um each"
             if out["ends_trimmed"] else "ends kept")
     print(f"  cut-off        {out['cutoff_m'] * um:g} um ({out['cutoff_rule']}), "
@@ -296,6 +322,10 @@ def _print_profiles(out: dict) -> None:
     corr = out["correlation"]
     print(f"  correlation    {'n/a' if corr is None else format(corr, '.3f')} "
           "(roughness profiles over the evaluation length)")
+    if corr is not None and out["registered"] and corr < LOW_CORRELATION:
+        print(f"  note           correlation below {LOW_CORRELATION:g}: check that "
+              "both profiles hold the same cut zone (a stylus contour that also "
+              "holds the part's flanks needs --x-range)")
     for name, path in out["files"].items():
         print(f"  {name:14} {path}")
 

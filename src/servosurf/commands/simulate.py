@@ -149,8 +149,11 @@ def _add_nc_args(p) -> None:
         "toolpath's tool; writes tool_edge.png")
     tool.add_argument(
         "--edge-compensated", action="store_true",
-        help="with --tool: the path already compensates this measured edge, so "
-        "only its fitted radius enters the sweep (not its deviation)")
+        help="with --tool: the radius-only model, a round nose of the trace's "
+        "fitted radius without the edge's shape. Not needed for a program that "
+        "compensates the edge: the compensation is in the program's Z and the "
+        "cusps are still imprints of the edge's shape, which --tool sweeps by "
+        "default (evidence: benchmarks/real_cut_1022.py)")
 
 
 def _check_cli_values(args) -> None:
@@ -200,8 +203,12 @@ def _nc_overrides(args) -> dict:
     }
 
 
-def load_spec(args):
-    """The toolpath spec of the positional argument (TOML or NC program)."""
+def load_spec(args, edge=None):
+    """The toolpath spec of the positional argument (TOML or NC program).
+
+    ``edge``: the measured tool edge of ``--tool`` (its fitted radius stands in for
+    ``--tool-radius``; the simulation hook then swaps the whole edge in).
+    """
     import dataclasses
     from pathlib import Path
 
@@ -213,8 +220,9 @@ def load_spec(args):
     if not tp.is_file():
         tp = resolve_file(args.toolpath, kind="toolpath")  # a built-in name
     nc = _nc_overrides(args)
+    radius = args.tool_radius if edge is None else edge.radius
     if tp.suffix.lower() == ".toml":
-        spec = load_toolpath(tp, nose_radius=args.tool_radius, nc_overrides=nc)
+        spec = load_toolpath(tp, nose_radius=radius, nc_overrides=nc)
         if spec.kind != "nc":
             given = [f"--{k.replace('_', '-')}" for k in
                      ("spindle_rpm", "block_time", "feed_per_rev", "reference",
@@ -228,7 +236,7 @@ def load_spec(args):
                     spec, tool=dataclasses.replace(spec.tool,
                                                    nose_radius=args.tool_radius))
         return spec
-    tool = None if args.tool_radius is None else Tool(nose_radius=args.tool_radius)
+    tool = None if radius is None else Tool(nose_radius=radius)
     return nc_spec(tp, tool=tool, **{k: v for k, v in nc.items() if v is not None})
 
 
@@ -286,8 +294,9 @@ def run(args) -> int:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if args.realisations < 1:
         raise ConfigError(f"--realisations must be >= 1, got {args.realisations}")
-    spec = load_spec(args)
     tp = Path(args.toolpath)
+    edge = _measured_edge(args)
+    spec = load_spec(args, edge)
     fmt = args.format or "datx"
     instrument = args.instrument or ("none" if spec.kind == "nc" else "cp300-20x")
     settings = {  # the paper's cutting set-up unless given
@@ -298,7 +307,10 @@ def run(args) -> int:
         "parts": None if args.parts is None else tuple(args.parts),
         "instrument": None if instrument == "none" else instrument,
     }
-    edge = _measured_edge(args, settings)
+    if edge is not None:
+        from ..toolpath import MeasuredEdge
+
+        settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
     dest = args.out or Path("results") / tp.stem
     if spec.kind != "nc":
         _check_footprint(args, spec, tp, dest)
@@ -307,7 +319,7 @@ def run(args) -> int:
         return _run_realisations(args, spec, tp, out, settings)
     res = simulate(spec, seed=args.seed, **settings)
     if spec.kind == "nc":
-        return _finish_nc(args, res, tp, fmt, out)
+        return _finish_nc(args, res, tp, fmt, out, edge)
     with stage("analysis"):
         summary = analyse(res)
     plots = summary.pop("_plots")
@@ -474,22 +486,20 @@ def _print_result(args, tp, res, summary, out) -> None:
     print_summary(args, title, rows, wrote=out)
 
 
-def _measured_edge(args, settings):
-    """``--tool EDGE``: fit the trace and add the hook that swaps the tool in."""
+def _measured_edge(args):
+    """``--tool EDGE``: the fitted trace (None without --tool)."""
     from ..errors import ConfigError
 
     if not args.tool:
         if args.edge_compensated:
             raise ConfigError("--edge-compensated needs --tool EDGE (a measured edge)")
         return None
-    from ..toolpath import MeasuredEdge, read_tool_edge
+    from ..toolpath import read_tool_edge
 
-    edge = read_tool_edge(args.tool)
-    settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
-    return edge
+    return read_tool_edge(args.tool)
 
 
-def _finish_nc(args, res, tp, fmt, out) -> int:
+def _finish_nc(args, res, tp, fmt, out, edge=None) -> int:
     """Analysis, map, figures and summary of an NC-program run."""
 
     from .._progress import stage
@@ -509,6 +519,10 @@ def _finish_nc(args, res, tp, fmt, out) -> int:
             from ..viz._mesh import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
+        if edge is not None:
+            files["tool_edge_png"] = str(edge.plot(out / "tool_edge.png"))
+            summary["tool_edge"] = {**edge.summary(),
+                                    "compensated": bool(args.edge_compensated)}
     summary.update(settings=res.settings, files=files, input_file=str(tp))
     write_json(out / "summary.json", summary)
     if args.json:
