@@ -1,5 +1,6 @@
 """Cutting: workpiece material, pre-cut surface, chip section and thrust force."""
 
+from ._cycle import cutting_cycle_stats
 from ._force import (
     DEFAULT_WORKPIECE,
     ChipModel,
@@ -12,6 +13,7 @@ from ._force import (
 )
 
 __all__ = [
+    "cutting_cycle_stats",
     "DEFAULT_WORKPIECE",
     "ChipModel",
     "Material",

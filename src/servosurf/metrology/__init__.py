@@ -22,6 +22,7 @@ _LAZY = {
     "iso4288_cutoff": "._roughness",
     # spectra
     "psd_1d": "._spectrum", "find_peaks_spectrum": "._spectrum",
+    "sampling_alias_bands": "._spectrum",
     # lenslet form
     "nominal_lenslet_profile": "._form", "nominal_lenslet_surface": "._form",
     "form_error_profile": "._form", "lenslet_centre_profile": "._form",

@@ -39,6 +39,7 @@ __all__ = [
     "builtin_machines",
     "describe_machine",
     "MINUS_3DB_DOUBLE_POLE",
+    "PROVENANCE_KINDS",
 ]
 
 #: -3 dB frequency of 1/(1 + s/w)^2 relative to w: sqrt(sqrt(2) - 1).
@@ -362,6 +363,11 @@ class Machine:
     alternative_disturbances: tuple[Disturbances, ...] = param(
         default_factory=tuple, doc="other named calibrations of the disturbances"
     )
+    provenance: tuple[tuple[str, str], ...] = param(
+        default_factory=tuple,
+        doc="[provenance] table: dotted key -> 'paper: ...', 'assumed: ...', "
+        "'derived: ...' or 'target:<figures>'",
+    )
     path: str = param("", doc="file this machine was read from (set by the loader)")
 
     def with_moving_mass(self, mass: float) -> Machine:
@@ -423,6 +429,9 @@ class Machine:
         """
         m = to_mapping(self)
         m.pop("path", None)
+        prov = m.pop("provenance", None)
+        if prov:
+            m["provenance"] = {k: v for k, v in prov}
         return m
 
 
@@ -508,6 +517,15 @@ def load_machine(source: str | Path | None = None) -> Machine:
                 f"({', '.join(builtins)}), got {parent!r}"
             )
         data = _merge(load_toml(builtins[parent]), data)
+    prov = data.get("provenance")
+    if prov is not None:
+        if not isinstance(prov, dict) or not all(
+            isinstance(v, str) for v in prov.values()
+        ):
+            raise ConfigError(
+                f"{path}: [provenance] must map dotted keys to label strings"
+            )
+        data["provenance"] = sorted([str(k), v] for k, v in prov.items())
     try:
         machine = from_mapping(Machine, data)
     except ConfigError as exc:
@@ -516,9 +534,71 @@ def load_machine(source: str | Path | None = None) -> Machine:
     return _resolve_csv(machine, Path(path).parent)
 
 
-def describe_machine() -> list[dict]:
+#: Provenance labels start with one of these kinds.
+PROVENANCE_KINDS = ("paper", "assumed", "derived", "target")
+
+
+def describe_machine(machine: Machine | None = None) -> list[dict]:
     """Return the documented parameter list of a machine file.
 
-    Each entry gives the key, unit, doc and source.
+    Parameters
+    ----------
+    machine : Machine, optional
+        Machine whose values and provenance to list (default: the built-in
+        ``seed-prototype``).
+
+    Returns
+    -------
+    list of dict
+        One entry per key: ``key``, ``unit``, ``doc``, ``value`` (the machine's),
+        ``provenance`` (the label of the machine file's ``[provenance]`` table: the
+        same text as there), ``default`` (the generic default of a file that omits
+        the key) and ``source`` (where that generic default comes from). The
+        alternative disturbance sets follow, under
+        ``alternative-disturbances.<name>.``.
     """
-    return describe(Machine)
+    from ..config import to_mapping
+
+    if machine is None:
+        machine = load_machine()
+    prov = dict(machine.provenance)
+    flat: dict = {}
+
+    def walk(obj: dict, prefix: str) -> None:
+        for k, v in obj.items():
+            key = f"{prefix}.{k}" if prefix else k
+            if isinstance(v, dict):
+                walk(v, key)
+            else:
+                flat[key] = v
+
+    mapping = to_mapping(machine)
+    alts = mapping.pop("alternative-disturbances", [])
+    mapping.pop("provenance", None)
+    walk(mapping, "")
+    rows = []
+    for r in describe(Machine):
+        if r["key"] in ("provenance", "alternative-disturbances", "path"):
+            continue
+        rows.append(
+            {**r, "value": flat.get(r["key"]), "provenance": prov.get(r["key"], "")}
+        )
+    sub = {
+        r["key"][len("disturbances."):]: r
+        for r in describe(Disturbances, prefix="disturbances")
+    }
+    for alt in alts:
+        name = alt.get("name", "?")
+        aflat: dict = {}
+        for k, v in alt.items():
+            if isinstance(v, dict):
+                for kk, vv in v.items():
+                    aflat[f"{k}.{kk}"] = vv
+            else:
+                aflat[k] = v
+        for k, r in sub.items():
+            key = f"alternative-disturbances.{name}.{k}"
+            rows.append(
+                {**r, "key": key, "value": aflat.get(k), "provenance": prov.get(key, "")}
+            )
+    return rows
