@@ -7,6 +7,18 @@ servosurf derives the ones its figures determine, reproducibly, from stated targ
 """
 
 from ._bank import ErrorBank, bandwidth_for_3db, curve_minimum
+from ._calibrate import (
+    COMPARE_RTOL,
+    DISTURBANCE_SETS,
+    PARAMETERS,
+    ZETA1,
+    Calibration,
+    base_machine,
+    calibrate,
+    calibrated_constants,
+    compare_constants,
+)
+from ._cut import LENS5, lenslet_cut, solve_thrust_pressure
 from ._disturbances import (
     DISTURBANCE_FIGURES,
     READINGS,
@@ -23,18 +35,6 @@ from ._disturbances import (
     shape_psd,
     to_disturbances,
 )
-from ._calibrate import (
-    COMPARE_RTOL,
-    DISTURBANCE_SETS,
-    PARAMETERS,
-    ZETA1,
-    Calibration,
-    base_machine,
-    calibrate,
-    calibrated_constants,
-    compare_constants,
-)
-from ._cut import LENS5, lenslet_cut, solve_thrust_pressure
 from ._figures import FIGURES, OPTIMUM_FACTOR, RMS_RTOL, PaperFigure, figure, within
 from ._mechanisms import critical_pole, overshoot_gap, stability_mechanism
 from ._structure import (

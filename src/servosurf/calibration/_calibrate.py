@@ -164,7 +164,8 @@ def _set(obj: Any, dotted: list[str], value: Any) -> Any:
     if len(dotted) == 1:
         return dataclasses.replace(obj, **{dotted[0].replace("-", "_"): value})
     head = dotted[0].replace("-", "_")
-    return dataclasses.replace(obj, **{head: _set(getattr(obj, head), dotted[1:], value)})
+    inner = _set(getattr(obj, head), dotted[1:], value)
+    return dataclasses.replace(obj, **{head: inner})
 
 
 def _start_structure() -> StructureParams:
@@ -274,7 +275,8 @@ def compare_constants(
         a, b = shipped.get(key), rerun.get(key)
         if a is None or b is None:
             rows.append(
-                {"key": key, "shipped": a, "rerun": b, "rel_diff": None, "within": False}
+                {"key": key, "shipped": a, "rerun": b, "rel_diff": None,
+                 "within": False}
             )
             continue
         d = abs(b - a) / abs(a) if a != 0 else abs(b)
@@ -428,7 +430,8 @@ def calibrate(
             if fixed_shapes is None:
                 say(f"round {rnd + 1}: shape search over {len(shapes)} shapes")
                 search = search_disturbances(
-                    machine, shapes=shapes, ctx=ctx, progress=progress
+                    machine, shapes=shapes, ctx=ctx, progress=progress,
+                    leave_one_out=0,
                 )
                 chosen, default = _choose(search)
             else:

@@ -86,7 +86,8 @@ def solve_thrust_pressure(
 
     Brent's method on ``log k_t`` at 1448 Hz, 0.175 kg (the cut's set-up).
     """
-    loop = ServoLoop(machine.with_moving_mass(HEAVY_MASS).with_bandwidth(FIG13C_BANDWIDTH))
+    heavy = machine.with_moving_mass(HEAVY_MASS)
+    loop = ServoLoop(heavy.with_bandwidth(FIG13C_BANDWIDTH))
 
     def g(lk: float) -> float:
         return np.log(lenslet_cut(loop, float(np.exp(lk)))["deviation_max_m"] / target)

@@ -101,6 +101,9 @@ SUBSETS: dict[str, tuple[str, ...]] = {
     **{f"all-but-{k}": tuple(x for x in _S52 + _S33 if x != k) for k in _S52 + _S33},
 }
 
+#: Main subsets of the search (the leave-one-out subsets run on the best shapes).
+MAIN_SUBSETS = ("section-5.2", "section-3.3", "measured", "all")
+
 #: Reference frequency of the levels, Hz.
 REF_FREQUENCY = 1000.0
 #: Sensor noise roll-off: the CPL190's 15 kHz bandwidth, order 4 (a double pole).
@@ -530,11 +533,12 @@ class DisturbanceSearch:
     candidates: list
 
     def best(self, subset: str | None = None, reading: str | None = None):
-        """Best candidate by :meth:`DisturbanceFit.score` (optionally restricted)."""
+        """Best candidate by :meth:`DisturbanceFit.score` among the main subsets'
+        fits (optionally one subset or reading)."""
         c = [
             x
             for x in self.candidates
-            if (subset is None or x.subset == subset)
+            if (x.subset in MAIN_SUBSETS if subset is None else x.subset == subset)
             and (reading is None or x.reading == reading)
         ]
         return min(c, key=lambda x: x.score())
@@ -585,10 +589,6 @@ class DisturbanceSearch:
 
 def _uses_reading(subset: str) -> bool:
     return bool(set(SUBSETS[subset]) & {"real_rms_0075_s33", "real_rms_0175_s33"})
-
-
-#: Main subsets of the search (the leave-one-out subsets run on the best shapes).
-MAIN_SUBSETS = ("section-5.2", "section-3.3", "measured", "all")
 
 
 def search_disturbances(

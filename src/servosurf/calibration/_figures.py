@@ -1,4 +1,4 @@
-"""The seed paper's numbers and claims, each with its place in the paper and a tolerance.
+"""The seed paper's numbers and claims, each with its place and a tolerance.
 
 Every figure servosurf compares with the paper is declared once here, with
 

@@ -119,7 +119,9 @@ def overshoot_gap(machine: Machine, thrust_pressure: float) -> dict[str, Any]:
     from ._cut import lenslet_cut
 
     heavy = machine.with_moving_mass(HEAVY_MASS)
-    base = lenslet_cut(ServoLoop(heavy.with_bandwidth(FIG13C_BANDWIDTH)), thrust_pressure)
+    base = lenslet_cut(
+        ServoLoop(heavy.with_bandwidth(FIG13C_BANDWIDTH)), thrust_pressure
+    )
     sens = []
     for scale in (0.5, 0.25):
         c = dataclasses.replace(

@@ -46,7 +46,8 @@ class Material:
         unit="Pa",
         low=0.0,
         doc="thrust force per uncut chip area, k_t",
-        source="calibrated to seed paper Fig. 17b (295 nm peak deviation)",
+        source="target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation; "
+        "servosurf.calibration.solve_thrust_pressure)",
     )
     specific_cutting_pressure: float = param(
         3.5e9,
@@ -55,7 +56,10 @@ class Material:
         doc="tangential force per uncut chip area",
         source="assumed; reported only",
     )
-    source: str = param("", doc="where the coefficients come from")
+    source: str = param(
+        "target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation)",
+        doc="where the coefficients come from",
+    )
 
 
 @dataclass(frozen=True)

@@ -294,6 +294,10 @@ def sampling_alias_bands(
         f = int(k) / s
         a = np.abs(f - np.round(f / fp) * fp)
         out.append(
-            {"harmonic": int(k), "low_per_m": float(a.min()), "high_per_m": float(a.max())}
+            {
+                "harmonic": int(k),
+                "low_per_m": float(a.min()),
+                "high_per_m": float(a.max()),
+            }
         )
     return out

@@ -13,6 +13,7 @@ from ._ident import (
 )
 from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, tune_pidf
 from ._machine import (
+    PROVENANCE_KINDS,
     Actuator,
     Controller,
     Disturbances,
@@ -27,6 +28,7 @@ from ._machine import (
 from ._plant import Plant, paper_eq_frf, plant_from_machine
 
 __all__ = [
+    "PROVENANCE_KINDS",
     "Actuator",
     "Controller",
     "Disturbances",

@@ -453,6 +453,20 @@ def _resolve_csv(machine: Machine, base: Path) -> Machine:
     )
 
 
+def _dotted_keys(data: dict, prefix: str = "") -> list[str]:
+    """Dotted keys of a TOML mapping's leaves (tables of tables flattened)."""
+    out = []
+    for k, v in data.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if key == "provenance":
+            continue
+        if isinstance(v, dict):
+            out.extend(_dotted_keys(v, key))
+        else:
+            out.append(key)
+    return out
+
+
 def _merge(base: dict, over: dict) -> dict:
     out = dict(base)
     for k, v in over.items():
@@ -516,7 +530,15 @@ def load_machine(source: str | Path | None = None) -> Machine:
                 f"{path}: inherit must name a built-in machine "
                 f"({', '.join(builtins)}), got {parent!r}"
             )
-        data = _merge(load_toml(builtins[parent]), data)
+        base = load_toml(builtins[parent])
+        # a number the file changes loses the built-in's provenance label (the label
+        # described the built-in's value), unless the file labels it itself
+        own = set(_dotted_keys(data)) - set((data.get("provenance") or {}))
+        if isinstance(base.get("provenance"), dict):
+            base["provenance"] = {
+                k: v for k, v in base["provenance"].items() if k not in own
+            }
+        data = _merge(base, data)
     prov = data.get("provenance")
     if prov is not None:
         if not isinstance(prov, dict) or not all(
@@ -599,6 +621,11 @@ def describe_machine(machine: Machine | None = None) -> list[dict]:
         for k, r in sub.items():
             key = f"alternative-disturbances.{name}.{k}"
             rows.append(
-                {**r, "key": key, "value": aflat.get(k), "provenance": prov.get(key, "")}
+                {
+                    **r,
+                    "key": key,
+                    "value": aflat.get(k),
+                    "provenance": prov.get(key, ""),
+                }
             )
     return rows
