@@ -471,6 +471,8 @@ _STARTS = (
     (6e-12, 1e-7, 1e-12),
 )
 _BOUNDS = ((1e-15, 1e-11, 1e-17), (1e-9, 1e-3, 1e-9))
+#: A fitted level within this many decades of its lower bound is set to the bound.
+LOWER_BOUND_SNAP = 0.01
 
 
 def fit_levels(
@@ -514,7 +516,11 @@ def fit_levels(
         )
         if best is None or r.cost < best.cost - 1e-12:
             best = r
-    levels = tuple(float(v) for v in 10.0**best.x)
+    # a level that ends on the search's lower bound is a source the figures do not
+    # need: it is set to the bound exactly (its value is then reproducible; the
+    # fitted optimum in that direction is flat)
+    x = np.where(best.x < lo + LOWER_BOUND_SNAP, lo, best.x)
+    levels = tuple(float(v) for v in 10.0**x)
     vals = bank_figures(ctx, reading=reading, basis=basis, levels=levels)
     return DisturbanceFit(shape, levels, subset, reading, vals, float(2 * best.cost))
 

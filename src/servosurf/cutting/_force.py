@@ -42,7 +42,7 @@ class Material:
 
     name: str = param("Electroless plated NiP alloy", doc="material name")
     specific_thrust_pressure: float = param(
-        1.016e9,
+        1265621909.1639545,
         unit="Pa",
         low=0.0,
         doc="thrust force per uncut chip area, k_t",
