@@ -123,7 +123,7 @@ def overshoot_gap(machine: Machine, thrust_pressure: float) -> dict[str, Any]:
         ServoLoop(heavy.with_bandwidth(FIG13C_BANDWIDTH)), thrust_pressure
     )
     sens = []
-    for scale in (0.5, 0.25):
+    for scale in (1.5, 0.5, 0.25):
         c = dataclasses.replace(
             heavy.controller, integral_ratio=heavy.controller.integral_ratio * scale
         )
@@ -140,6 +140,8 @@ def overshoot_gap(machine: Machine, thrust_pressure: float) -> dict[str, Any]:
                 "rho_scale": scale,
                 "sensor_overshoot_m": r["sensor_overshoot_m"],
                 "sensor_max_m": r["sensor_max_m"],
+                "tool_overshoot_m": r["deviation_overshoot_m"],
+                "deviation_max_m": r["deviation_max_m"],
             }
         )
     return {
