@@ -203,3 +203,23 @@ def test_bad_machine_key_via_subprocess(tmp_path):
     assert res.returncode == 1
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "mechanics.k9" in lines[0]
+
+
+@pytest.mark.slow
+def test_paper_surface_rows_come_from_the_multi_seed_study(capsys):
+    """The peak rows come from the mean spectrum with each peak's seed fraction;
+    the form rows from the fitted registration; aliases are removed."""
+    assert main(["-q", "paper", "--json", "--only", "surface", "--seeds", "3"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    rows = {r["key"]: r for r in data["rows"]}
+    s5 = data["surfaces"]["lenslet_5um"]
+    assert s5["seeds"] == [0, 1, 2]
+    phys = [p for p in s5["peaks"] if not p["alias"]]
+    nearest = min(phys, key=lambda p: abs(p["freq_per_m"] - 170e3))
+    assert rows["lens5_peak_170"]["servosurf"] == nearest["freq_per_m"]
+    assert "of the seeds" in rows["lens5_peak_170"]["setup"]
+    form = s5["form"]["fitted/servosurf"]
+    assert rows["form_error_max"]["servosurf"] == form["max_central_m"]
+    assert form["max_central_m"] < form["max_rim_m"]
+    assert rows["air_cut_ratio"]["role"] == "check"
+    assert all(not p["alias"] or p["alias_kind"] for p in s5["peaks"])

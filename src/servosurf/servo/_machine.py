@@ -12,8 +12,19 @@ Decisions recorded here (see also the module docstrings of ``_plant`` and ``_loo
 * The sensor is fixed to the coil carrier (m2) as the paper's text says; Eq 7's ``x1``
   is available as ``sensor.location = "tool"``.
 * "Moving mass" means m1 + m2 (paper section 3.3). Extra mass (the glued steel blocks)
-  is added to ``mechanics.added-mass-on`` (m2 by default: the blocks are glued to the
-  tool holder, which is part of the rigid coil-carrier body).
+  is added to ``mechanics.added-mass-on``. A file that omits the key puts it on m2
+  (a tool holder that is part of the rigid coil-carrier body); the built-in
+  ``seed-prototype`` puts it on m1, the tool body, as the paper's "steel blocks glued
+  onto the tool holder" (4.1) reads, and only that placement gives the paper's
+  measured instability above 1.6 kHz at 0.175 kg: with the blocks on m2 the loop
+  stays stable (16.8 dB of gain margin at 1448 Hz) until the tuning rule runs out of
+  positive gains. ``servosurf paper`` reports both placements and the pole that
+  leaves the unit circle (the 11.7 kHz appendage mode, not the tool mode).
+* Every number of a machine file may carry a provenance label in its
+  ``[provenance]`` table (``paper: ...``, ``assumed: ...``, ``derived: ...``,
+  ``target:<figure keys>``); the built-in file is written by
+  :func:`servosurf.calibration.calibrate`, and ``servosurf machines --describe``
+  prints the same labels.
 """
 
 from __future__ import annotations
@@ -533,7 +544,7 @@ def load_machine(source: str | Path | None = None) -> Machine:
         base = load_toml(builtins[parent])
         # a number the file changes loses the built-in's provenance label (the label
         # described the built-in's value), unless the file labels it itself
-        own = set(_dotted_keys(data)) - set((data.get("provenance") or {}))
+        own = set(_dotted_keys(data)) - set(data.get("provenance") or {})
         if isinstance(base.get("provenance"), dict):
             base["provenance"] = {
                 k: v for k, v in base["provenance"].items() if k not in own
