@@ -266,3 +266,15 @@ def test_the_pole_leaving_the_unit_circle_is_the_appendage_mode(machine):
     f4 = np.sqrt(m.k4 * (1 / m.m4 + 1 / m.m2)) / (2 * np.pi)  # two-body estimate
     assert above["frequency_hz"] == pytest.approx(f4, rel=0.05)
     assert above["energy_shares"]["k4"] > 0.5
+
+
+def test_a_fitted_number_is_relabelled(machine):
+    from servosurf.servo import set_param
+    from servosurf.servo._ident import SET_PARAM_LABEL
+
+    m = set_param(machine, "mechanics.k2", 3.0e4)
+    prov = dict(m.provenance)
+    assert prov["mechanics.k2"] == SET_PARAM_LABEL
+    assert prov["mechanics.k1"] == dict(machine.provenance)["mechanics.k1"]
+    m = set_param(machine, "actuator.force_constant", 9.0)
+    assert dict(m.provenance)["actuator.force-constant"] == SET_PARAM_LABEL
