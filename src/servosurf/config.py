@@ -335,6 +335,13 @@ def _toml_value(v: Any) -> str:
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
+def _toml_key(k: str) -> str:
+    """A bare TOML key, or a quoted one when it holds other characters (dots)."""
+    import re
+
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _toml_value(k)
+
+
 def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
     """Serialise a nested mapping of plain values to TOML text.
 
@@ -372,7 +379,7 @@ def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
         elif path and scalars:
             lines.append(f"\n[{path}]")
         for k, v in scalars.items():
-            lines.append(f"{k} = {_toml_value(v)}")
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
         for k, v in subs.items():
             emit(v, f"{path}.{k}" if path else k)
         for k, v in arrays.items():

@@ -462,6 +462,7 @@ def simulate(
 #: Scalar metrics of :func:`realisation_study`, each in SI (m, s, N).
 REALISATION_METRICS = (
     "form_error_max_m",
+    "form_error_rim_max_m",
     "form_error_rms_m",
     "ra_m",
     "sa_m",

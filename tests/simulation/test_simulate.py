@@ -133,8 +133,12 @@ def test_simulate_cli_json_keys(tmp_path, capsys):
     ):
         assert key in data
     assert data["analysed_map"] == "measured"  # default: the CP300 20X model
-    assert 150e-9 < data["form_error_max_m"] < 350e-9
+    # the central-chord maximum (fitted registration) lies below the rim maximum
+    assert 0 < data["form_error_max_m"] < data["form_error_rim_max_m"] < 350e-9
     assert data["form_error_lag_m"] > 0
+    assert set(data["form_error_registrations"]) >= {
+        "fitted/servosurf", "deepest_point/servosurf", "commanded_centre/servosurf"
+    }
     assert any(abs(p - 173e3) < 10e3 for p in data["spectrum_peaks_per_m"][:3])
     for name in (
         "map.png",
@@ -228,7 +232,9 @@ def test_simulate_cli_realisations(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["seeds"] == [2, 3, 4]
     assert len(data["realisations"]["form_error_max_m"]) == 3
-    assert 150e-9 < data["statistics"]["form_error_max_m"]["mean"] < 350e-9
+    st = data["statistics"]
+    assert 150e-9 < st["form_error_rim_max_m"]["mean"] < 350e-9
+    assert 0 < st["form_error_max_m"]["mean"] < st["form_error_rim_max_m"]["mean"]
     png = (tmp_path / "r" / "realisations.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     saved = json.loads((tmp_path / "r" / "realisations.json").read_text())

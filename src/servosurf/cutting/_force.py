@@ -43,12 +43,13 @@ class Material:
 
     name: str = param("Electroless plated NiP alloy", doc="material name")
     specific_thrust_pressure: float = param(
-        1.016e9,
+        1265621909.1639545,
         unit="Pa",
         low=0.0,
         plausible=(1e7, 1e11),
         doc="thrust force per uncut chip area, k_t",
-        source="calibrated to seed paper Fig. 17b (295 nm peak deviation)",
+        source="target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation; "
+        "servosurf.calibration.solve_thrust_pressure)",
     )
     specific_cutting_pressure: float = param(
         3.5e9,
@@ -57,7 +58,10 @@ class Material:
         doc="tangential force per uncut chip area",
         source="assumed; reported only",
     )
-    source: str = param("", doc="where the coefficients come from")
+    source: str = param(
+        "target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation)",
+        doc="where the coefficients come from",
+    )
     # -- material parts of the forward model (switched on by simulate's parts
     # "ploughing", "side-flow" and "recovery"); heights scale with the tool's
     # cutting-edge radius r_n (tool.edge-radius)
