@@ -685,7 +685,8 @@ def simulation_manifest(
         A comment line written at the top.
     """
     if kind not in KINDS:
-        raise ConfigError(f"recording kind {kind!r} unknown (kinds: {', '.join(KINDS)})")
+        raise ConfigError(
+            f"recording kind {kind!r} unknown (kinds: {', '.join(KINDS)})")
 
     def q(v) -> str:
         return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
