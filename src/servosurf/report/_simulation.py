@@ -139,9 +139,10 @@ def lenslet_spectrum(
     row to one cut-off inside its last (where the high-pass has data on both sides),
     of the map high-passed at ``cutoff`` (m). Lenslets cut by the map's top or bottom
     edge are left out (used only when the map holds no complete one); all profiles
-    are cut to the shortest length so that their PSDs share one frequency grid. ``blocks`` (the ``used`` list of an earlier call
-    on a map of the same field) reuses those pixel ranges, so that the spectra of
-    several realisations share their grid.
+    are cut to the shortest length so that their PSDs share one frequency grid.
+    ``blocks`` (the ``used`` list of an earlier call on a map of the same field)
+    reuses those pixel ranges, so that the spectra of several realisations share
+    their grid.
 
     Returns
     -------
