@@ -230,7 +230,8 @@ def test_pointwise_surface_agrees_with_sweep(ind):
                               center_y=4e-6)
 
     def dev(t):  # a deviation of the tool from its command, m
-        return 3e-9 * np.sin(2 * np.pi * 1370.0 * t) + 1e-9 * np.cos(2 * np.pi * 333 * t)
+        w1, w2 = 2 * np.pi * 1370.0, 2 * np.pi * 333.0
+        return 3e-9 * np.sin(w1 * t) + 1e-9 * np.cos(w2 * t)
 
     sp = sample(spec, fs=199.6e3, field=fld)
     want = sweep(sp.with_z(sp.z + dev(sp.t)), spec.tool, fld, check=False).z
