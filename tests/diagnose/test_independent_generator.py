@@ -177,6 +177,20 @@ def test_time_loop_agrees_with_servoloop_on_a_lenslet_air_cut(ind, mach, servo_l
                                atol=FE_ATOL)
 
 
+@pytest.mark.parametrize("wt", [0.05, 1.0, 4.9])
+def test_exact_amplifier_step_equals_the_matrix_exponential(ind, mach, wt):
+    import scipy.linalg
+
+    m, _ = mach
+    w = m.w_amp
+    t = wt / w
+    a = np.array([[0.0, 1.0], [-(w**2), -2 * w]])
+    x0 = np.array([0.3 - 0.05, 2.0e4])  # deviation from the target 0.05 A
+    want = scipy.linalg.expm(a * t) @ x0
+    i1, j1 = ind.loop._amp_step(0.3, 2.0e4, 0.05, w, t)
+    np.testing.assert_allclose([i1 - 0.05, j1], want, rtol=1e-12, atol=1e-12)
+
+
 def test_integrator_converges_with_the_cutting_force(ind, mach):
     m, c = mach
     n = 8000
@@ -289,13 +303,14 @@ def test_low_frequency_extension_adds_the_power_below_the_band(ind, mach):
 
 
 # ------------------------------------------------------------------ cases
-def test_written_case_reads_back_through_the_manifest_reader(ind, tmp_path):
+@pytest.mark.parametrize("fmt", ["csv", "npz"])
+def test_written_case_reads_back_through_the_manifest_reader(ind, tmp_path, fmt):
     from servosurf.diagnose import load_manifest
 
     C = ind.campaign
     ctx = C.context()
     camp = C.Campaign(
-        idle={"records": 3, "length": 512, "div": 2, "fmt": "csv"},
+        idle={"records": 3, "length": 512, "div": 2, "fmt": fmt},
         air={"length": 2048, "div": 1, "fmt": "npz"},
         cut={"length": 2048, "div": 2, "force_noise": 2e-3},
         frfs={"frf-open-loop": {"n": 300, "fmin": 20.0, "fmax": 40e3,
@@ -305,7 +320,7 @@ def test_written_case_reads_back_through_the_manifest_reader(ind, tmp_path):
     C.write_case(tmp_path, ctx, camp, rec)
     man = load_manifest(tmp_path / "manifest.toml")
     got = {r.name: r for r in man.recordings}
-    idle = got["idle.csv"].data
+    idle = got[f"idle.{fmt}"].data
     assert idle["fs"] == pytest.approx(99.8e3, rel=1e-9)
     assert len(idle["records"]) == 3
     np.testing.assert_allclose(idle["records"][1]["fe"], rec["idle"][1], rtol=1e-11,
@@ -371,11 +386,12 @@ def test_physical_bounds_refuse_the_issue_examples(ind):
 def test_parameter_errors_of_curves_and_scalars(ind):
     S = ind.score
     t = np.linspace(0.0, 4.47, 50)
-    truth = {"drift_curve": {"x": list(t), "y": list(2e-9 * -np.expm1(-t / 0.7))}}
-    est = {"amplitude": 2e-9, "time_constant": 0.7, "rate": 0.0}
+    y = 2e-9 * -np.expm1(-t / 0.7) + 3e-10 * t
+    truth = {"drift_curve": {"x": list(t), "y": list(y)}}
+    est = {"amplitude": 2e-9, "time_constant": 0.7, "rate": 3e-10}
     assert S.param_error("thermal-drift", truth, est, 1e9) == pytest.approx(0.0,
                                                                            abs=1e-12)
-    est["amplitude"] = 2.2e-9
+    est["amplitude"], est["rate"] = 2.2e-9, 3.3e-10
     assert S.param_error("thermal-drift", truth, est, 1e9) == pytest.approx(0.1,
                                                                            rel=1e-9)
     x = np.linspace(-5e-6, 15e-6, 21)

@@ -200,11 +200,22 @@ def _rhs(X, cur, xg, vg, zoff, p, dX):
 
 
 @njit(cache=True)
-def _amp_at(i0, j0, c, w, t):
-    """Amplifier current at time t after a step to target c from (i0, di/dt j0)."""
+def _amp_step(i0, j0, c, w, t):
+    """Exact amplifier state ``(I, dI/dt)`` a time t after (i0, j0), target c.
+
+    ``I'' + 2 w I' + w^2 I = w^2 c`` with c constant: the deviation from c
+    evolves with ``exp(A t) = exp(-w t) [[1 + w t, t], [-w^2 t, 1 - w t]]``.
+    """
     e = math.exp(-w * t)
     d0 = i0 - c
-    return c + e * ((1.0 + w * t) * d0 + t * j0)
+    return (c + e * ((1.0 + w * t) * d0 + t * j0),
+            e * (-w * w * t * d0 + (1.0 - w * t) * j0))
+
+
+@njit(cache=True)
+def _amp_at(i0, j0, c, w, t):
+    """Amplifier current at time t after a step to target c from (i0, di/dt j0)."""
+    return _amp_step(i0, j0, c, w, t)[0]
 
 
 @njit(cache=True)
@@ -322,11 +333,7 @@ def _sim(p, ctrl, T, dtot, nsub, adc_q, dac_q, sens, r, nsen, icur, xgn, zoff,
                 for q in range(13):
                     X[q] += h / 6.0 * (k1[q] + 2.0 * k2[q] + 2.0 * k3[q] + k4[q])
                 # exact amplifier update over h
-                e1 = math.exp(-wa * h)
-                d0 = amp_i - c
-                ni = c + e1 * ((1.0 + wa * h) * d0 + h * amp_j)
-                nj = e1 * (-wa * wa * h * d0 + (1.0 - wa * h) * amp_j)
-                amp_i, amp_j = ni, nj
+                amp_i, amp_j = _amp_step(amp_i, amp_j, c, wa, h)
         out[5, k] = amp_i
 
 
