@@ -303,6 +303,20 @@ def test_low_frequency_extension_adds_the_power_below_the_band(ind, mach):
 
 
 # ------------------------------------------------------------------ cases
+@pytest.mark.parametrize("f0, gain", [(1e3, 1.0), (20e3, 1.0), (39.9e3, 1.0),
+                                      (60e3, 0.0), (80e3, 0.0)])
+def test_half_rate_logger_is_flat_in_band_and_anti_aliased(ind, f0, gain):
+    C = ind.campaign
+    fs, n = 199.6e3, 4096
+    t = (np.arange(n + 2 * C.PAD) - C.PAD) / fs
+    y = C._logger(np.sin(2 * np.pi * f0 * t + 0.3), 2, fs, n)
+    tl = np.arange(y.size) * 2 / fs
+    fa = f0 if f0 < fs / 4 else fs / 2 - f0  # where a non-filtered sine aliases
+    basis = np.column_stack([np.sin(2 * np.pi * fa * tl), np.cos(2 * np.pi * fa * tl)])
+    amp = math.hypot(*np.linalg.lstsq(basis, y, rcond=None)[0])
+    assert amp == pytest.approx(gain, abs=1e-4)
+
+
 @pytest.mark.parametrize("fmt", ["csv", "npz"])
 def test_written_case_reads_back_through_the_manifest_reader(ind, tmp_path, fmt):
     from servosurf.diagnose import load_manifest

@@ -206,11 +206,36 @@ def _draw_profile(rng, ring: int) -> dict:
 
 
 # ------------------------------------------------------------------ recordings
-def _logger(x: np.ndarray, div: int) -> np.ndarray:
-    """Anti-aliased decimation by ``div`` (1: unchanged)."""
+#: Samples the logger's filter sees on each side of a record (half its length).
+PAD = 128
+_FIR: dict = {}
+
+
+def _anti_alias(fs: float) -> np.ndarray:
+    """Linear-phase anti-alias FIR of the half-rate logger (255 taps, Kaiser 10).
+
+    Cut-off 45 kHz at 199.6 kHz: flat to 3e-6 up to 39.9 kHz (0.8 of the logged
+    Nyquist frequency, the band the diagnosis compares), below -110 dB from
+    49.9 kHz.
+    """
+    if fs not in _FIR:
+        _FIR[fs] = scipy.signal.firwin(2 * PAD - 1, 45e3, window=("kaiser", 10.0),
+                                       fs=fs)
+    return _FIR[fs]
+
+
+def _logger(x: np.ndarray, div: int, fs: float, n: int) -> np.ndarray:
+    """Logged record of ``n`` samples from ``x`` (which has PAD samples each side).
+
+    ``div = 1``: the samples; ``div = 2``: the anti-alias FIR applied to the
+    continuous signal (with its time-delay compensated, as a logger stamps it),
+    then every second sample.
+    """
+    x = np.asarray(x, dtype=float)
     if div == 1:
-        return np.asarray(x, dtype=float).copy()
-    return scipy.signal.decimate(x, div, ftype="fir", zero_phase=True)
+        return x[PAD : PAD + n].copy()
+    y = np.convolve(x, _anti_alias(fs), mode="same")
+    return y[PAD : PAD + n : div].copy()
 
 
 def _noise_run(ctx, spec: Spec, n: int, rng, low_freq: bool) -> dict:
@@ -226,8 +251,9 @@ def _noise_run(ctx, spec: Spec, n: int, rng, low_freq: bool) -> dict:
 
 
 def _run(ctx, spec: Spec, command: np.ndarray, rng, *, clean: bool, low_freq: bool,
-         chip: bool, t_abs: float, offset_fn=None, lines: bool = True) -> dict:
-    """Loop run of ``command`` after an idle warm-up; outputs from t = 0."""
+         chip: bool, t_abs: float, offset_fn=None, lines: bool = True,
+         pre: int = 0) -> dict:
+    """Loop run of ``command`` after an idle warm-up; outputs from ``-pre`` samples."""
     fs = ctx.mach.fs
     nw = int(WARMUP * fs)
     n = nw + command.size
@@ -251,7 +277,7 @@ def _run(ctx, spec: Spec, command: np.ndarray, rng, *, clean: bool, low_freq: bo
                   hold=ctx.chip.hold)
     o = simulate(ctx.mach, ctx.ctrl, ref, eff=spec.loop, chip=ch, lines=lines,
                  zoff=zoff, t0=t_abs - WARMUP, nsub=NSUB, **kw)
-    return {k: v[nw:] for k, v in o.items()}
+    return {k: v[nw - pre :] for k, v in o.items()}
 
 
 def _pickup(spec: Spec, t: np.ndarray) -> np.ndarray:
@@ -313,28 +339,36 @@ def recordings(ctx: Context, camp: Campaign, spec: Spec, seed: int, *,
         return only is None or k in only
 
     if camp.idle and want("idle"):
+        # consecutive records of one idle run
         d = camp.idle
         n = d["records"] * d["length"]
-        o = _run(ctx, spec, np.zeros(n), rng, clean=clean,
-                 low_freq=camp.low_freq_base, chip=False, t_abs=t_abs["idle"])
-        t = np.arange(n) / fs + t_abs["idle"]
+        o = _run(ctx, spec, np.zeros(n + PAD), rng, clean=clean,
+                 low_freq=camp.low_freq_base, chip=False, t_abs=t_abs["idle"],
+                 pre=PAD)
+        t = (np.arange(n + 2 * PAD) - PAD) / fs + t_abs["idle"]
         fe = o["fe"] + _pickup(spec, t)
-        fe = fe.reshape(d["records"], d["length"])
-        out["idle"] = np.stack([_logger(r, d["div"]) for r in fe])
+        L = d["length"]
+        fe = np.stack([_logger(fe[j * L : (j + 1) * L + 2 * PAD], d["div"], fs, L)
+                       for j in range(d["records"])])
+        out["idle"] = fe
     for key in ("air", "air_b"):
         d = getattr(camp, key)
         if not d or not want(key):
             continue
-        t = np.arange(d["length"]) / fs
+        n = d["length"]
+        t = (np.arange(n + 2 * PAD) - PAD) / fs
         if key == "air":
             cmd = path.command(t)
         else:
             a = path.amplitude
             cmd = (a - path.depth) - a * np.sin(2 * math.pi * d["f"] * t)
-        o = _run(ctx, spec, cmd, rng, clean=clean, low_freq=camp.low_freq_base,
-                 chip=False, t_abs=t_abs[key])
+        cmd[:PAD] = 0.0  # at rest before the record starts
+        o = _run(ctx, spec, cmd[PAD:], rng, clean=clean, low_freq=camp.low_freq_base,
+                 chip=False, t_abs=t_abs[key], pre=PAD)
         fe = o["fe"] + _pickup(spec, t + t_abs[key])
-        out[key] = {"fe": _logger(fe, d["div"]), "command": _logger(cmd, d["div"])}
+        # the command is a controller variable: logged by plain decimation
+        out[key] = {"fe": _logger(fe, d["div"], fs, n),
+                    "command": cmd[PAD : PAD + n : d["div"]].copy()}
     need_map = (camp.surface or camp.profiles) and want("map")
     if (camp.cut and want("cut")) or need_map:
         ncut = camp.cut["length"] if camp.cut else 0
@@ -344,21 +378,22 @@ def recordings(ctx: Context, camp: Campaign, spec: Spec, seed: int, *,
             n = int(math.ceil(path.duration * fs)) + 2
         else:
             n = ncut
+        n = max(n, ncut + PAD)
         t = np.arange(n) / fs
         o = _run(ctx, spec, path.command(t), rng, clean=clean,
                  low_freq=camp.low_freq_base, chip=True, t_abs=t_abs["cut"],
-                 offset_fn=spec.offset)
+                 offset_fn=spec.offset, pre=PAD)
         if camp.cut and want("cut"):
             d = camp.cut
-            tc = t[:ncut]
-            fe = o["fe"][:ncut] + _pickup(spec, tc + t_abs["cut"] + 0.5)
-            fo = o["force"][:ncut]
+            te = (np.arange(ncut + 2 * PAD) - PAD) / fs
+            fe = o["fe"][: ncut + 2 * PAD] + _pickup(spec, te + t_abs["cut"] + 0.5)
+            fo = o["force"][: ncut + 2 * PAD].copy()
             if not clean:
-                fo = fo + d["force_noise"] * rng.standard_normal(ncut)
-            out["cut"] = {"t": tc[:: d["div"]] if d["div"] > 1 else tc,
-                          "fe": _logger(fe, d["div"]), "force": _logger(fo, d["div"])}
-            if d["div"] > 1:
-                out["cut"]["t"] = np.arange(out["cut"]["fe"].size) * d["div"] / fs
+                fo = fo + d["force_noise"] * rng.standard_normal(fo.size)
+            fe_l = _logger(fe, d["div"], fs, ncut)
+            out["cut"] = {"t": np.arange(fe_l.size) * d["div"] / fs, "fe": fe_l,
+                          "force": _logger(fo, d["div"], fs, ncut)}
+        o = {k: v[PAD:] for k, v in o.items()}
         if need_map:
             x1 = o["tool"]
             if clean and spec.lines:
