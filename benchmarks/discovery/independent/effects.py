@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -582,7 +582,3 @@ NULLS = {
 }
 ALL = {**CATALOGUE_LIKE, **OUT_OF_CATALOGUE, **NULLS}
 
-
-def spec_with(spec: Spec, **kw) -> Spec:
-    """Copy of a spec with fields replaced."""
-    return replace(spec, **kw)

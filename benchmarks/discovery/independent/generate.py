@@ -108,7 +108,7 @@ def stable(ctx, spec) -> bool:
     return bool(late <= 0.5 * mid or late < 1e-15)
 
 
-def _groups(camp, eff) -> set | None:
+def _groups(eff) -> set | None:
     if eff.needs_noise:
         return {"idle", "air", "air_b", "cut"}
     return None
@@ -120,7 +120,7 @@ def measure_enr(ctx, camp, eff, s, seed, rec0, sigma) -> dict:
     if spec.loop.linear.mode_mass > 0 and not stable(ctx, spec):
         return {"unstable": math.inf}
     rec = CP.recordings(ctx, camp, spec, seed, clean=not eff.needs_noise,
-                        only=_groups(camp, eff))
+                        only=_groups(eff))
     return CP.enr_by_recording(rec, rec0, sigma)
 
 
@@ -214,7 +214,7 @@ def make_case(index: int, spec: dict, seed: int, folder: Path, *,
             break
         sigma = CP.noise_rms(ctx, camp)
         rec0 = CP.recordings(ctx, camp, CP.nominal_spec(), nseed,
-                             clean=not eff.needs_noise, only=_groups(camp, eff))
+                             clean=not eff.needs_noise, only=_groups(eff))
         s, e, per = scale_to_enr(ctx, camp, eff, spec["enr"], nseed, rec0, sigma)
         if np.isfinite(e) and e > 0 and abs(math.log(e / spec["enr"])) <= math.log(
                 ENR_TOLERANCE):

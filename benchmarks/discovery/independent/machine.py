@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -462,11 +462,3 @@ def appended_mode(mach: Machine, ex: LinearExtras) -> tuple[float, float]:
     wn = abs(best)
     return float(wn / (2 * math.pi)), float(-best.real / wn)
 
-
-def with_psd_scale(mach: Machine, **scale: float) -> Machine:
-    """Copy with PSDs multiplied (``sensor=1.5`` multiplies the sensor PSD)."""
-    psd = dict(mach.psd)
-    for k, v in scale.items():
-        p = psd[k]
-        psd[k] = replace(p, level=p.level * math.sqrt(v), floor=p.floor * math.sqrt(v))
-    return replace(mach, psd=psd)
