@@ -13,6 +13,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 SHARED = Path(os.environ.get("SERVOSURF_SHARED", REPO.parent / "shared"))
 ZYGO = SHARED / "data" / "zygo"
+UPM = SHARED / "data" / "upm_sts"
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -32,3 +33,11 @@ def zygo_dir() -> Path:
     if not ZYGO.is_dir():
         pytest.skip(f"shared data folder {ZYGO} absent")
     return ZYGO
+
+
+@pytest.fixture(scope="session")
+def upm_dir() -> Path:
+    """Folder of the real slow-tool-servo cut files (skips when ../shared is absent)."""
+    if not UPM.is_dir():
+        pytest.skip(f"shared data folder {UPM} absent")
+    return UPM

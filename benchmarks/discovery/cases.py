@@ -23,9 +23,9 @@ record through the true loop (generator's own synthesis), 2 mN force-sensor nois
 simulator's knobs where the physics is the same; the surface map is swept with the
 project's kernel (:func:`servosurf.toolpath.sweep`, waviness through
 :class:`~servosurf.toolpath.Tool`), and the out-of-catalogue nonlinearities run in
-this file's own loop kernel. Effect strengths are set by the effect-to-noise ratio
-(ENR): RMS of the effect in a recording over the noise RMS of that recording,
-maximised over recordings.
+the simulator's one loop kernel (:class:`servosurf.servo.Nonlinearity`). Effect
+strengths are set by the effect-to-noise ratio (ENR): RMS of the effect in a
+recording over the noise RMS of that recording, maximised over recordings.
 """
 
 from __future__ import annotations
@@ -36,10 +36,10 @@ import os
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 
+from servosurf.cutting import ChipModel
 from servosurf.diagnose._sim import CaseModel, ModelParams
-from servosurf.servo import load_machine, write_frf_csv
+from servosurf.servo import Nonlinearity, load_machine, write_frf_csv
 from servosurf.toolpath import Tool, load_toolpath, sample, sweep
 
 HERE = Path(__file__).resolve().parent
@@ -126,116 +126,36 @@ def base_case() -> CaseModel:
     return _CASE["case"]
 
 
-# ------------------------------------------------------------------ OOL kernel
-@njit(cache=False)
-def _ool_loop(
-    ad, bd, cx, ac, bc, cc, dc, sens, nd, frac, r, kt, radius, chip, kind, par, bl, out
-):
-    """Loop with an out-of-catalogue force on the coil carrier (m2).
+# ------------------------------------------------------------------ OOL loop
+def ool_nonlinearity(ool: dict) -> Nonlinearity:
+    """The out-of-catalogue force on the coil carrier (m2) as a loop nonlinearity.
 
-    kind 1: Bouc-Wen hysteresis ``F = -par0 z``, ``z' = v - par1 |v| z - par2 v |z|``;
-    kind 2: quadratic damping ``F = -par0 |v| v``; kind 3: Coulomb friction
-    ``F = -par0 tanh(v / par1)``. ``cx`` rows: x1, y, I, x2, x3, v2.
+    ``bouc-wen-hysteresis``: ``F = -par0 z``, ``z' = v - par1 |v| z - par2 v |z|``
+    (v the flexure's deflection rate); ``quadratic-damping``: ``F = -par0 |v| v``;
+    ``coulomb-friction``: ``F = -par0 tanh(v / par1)``. They run in the
+    simulator's one loop kernel (:meth:`servosurf.servo.ServoLoop.simulate`).
     """
-    n = r.shape[0]
-    na = ad.shape[0]
-    nc = ac.shape[0]
-    xa = np.zeros(na)
-    xn = np.zeros(na)
-    xc = np.zeros(nc)
-    xcn = np.zeros(nc)
-    reg = np.zeros(nd + 2)
-    zbw = 0.0
-    dt = 1.0 / 199.6e3
-    for k in range(n):
-        x1 = 0.0
-        ym = 0.0
-        v2 = 0.0
-        for j in range(na):
-            x1 += cx[0, j] * xa[j]
-            ym += cx[1, j] * xa[j]
-            v2 += cx[5, j] * xa[j]
-        e = sens * (r[k] - ym)
-        u = dc * e
-        for j in range(nc):
-            u += cc[j] * xc[j]
-        for i in range(nc):
-            acc = bc[i, 0] * e
-            for j in range(nc):
-                acc += ac[i, j] * xc[j]
-            xcn[i] = acc
-        for i in range(nc):
-            xc[i] = xcn[i]
-        for j in range(nd + 1, 0, -1):
-            reg[j] = reg[j - 1]
-        reg[0] = u
-        ua = (1.0 - frac) * reg[nd] + frac * reg[nd + 1]
-        f = 0.0
-        if chip == 1:
-            d = -x1
-            if d > 0.0:
-                if d > radius:
-                    d = radius
-                h = radius - d
-                f = kt * (
-                    radius * radius * math.acos(h / radius)
-                    - h * math.sqrt(max(2.0 * radius * d - d * d, 0.0))
-                )
-        fx = 0.0
-        if kind == 1:
-            fx = -par[0] * zbw
-            zbw += dt * (v2 - par[1] * abs(v2) * zbw - par[2] * v2 * abs(zbw))
-        elif kind == 2:
-            fx = -par[0] * abs(v2) * v2
-        elif kind == 3:
-            fx = -par[0] * math.tanh(v2 / par[1])
-        ieq = fx / bl
-        for i in range(na):
-            acc = bd[i, 0] * ua + bd[i, 1] * ieq + bd[i, 2] * f
-            for j in range(na):
-                acc += ad[i, j] * xa[j]
-            xn[i] = acc
-        for i in range(na):
-            xa[i] = xn[i]
-        out[0, k] = x1
-        out[1, k] = r[k] - ym
-        out[2, k] = f
+    par = [float(v) for v in ool["par"]]
+    kind = ool["kind"]
+    if kind == "bouc-wen-hysteresis":
+        return Nonlinearity(bouc_wen_stiffness=par[0], bouc_wen_beta=par[1],
+                            bouc_wen_gamma=par[2])
+    if kind == "quadratic-damping":
+        return Nonlinearity(quadratic_damping=par[0])
+    if kind == "coulomb-friction":
+        return Nonlinearity(friction=par[0], friction_velocity=par[1])
+    raise ValueError(f"not a loop nonlinearity: {kind!r}")
 
 
 def ool_simulate(case: CaseModel, ool: dict, ref: np.ndarray, chip: bool) -> dict:
     """Deterministic loop run with an out-of-catalogue nonlinearity."""
-    ad, bd, cx, nd, frac = case.discrete(ModelParams())
-    ac, bc, cc, dc = case.controller()
-    cx6 = np.zeros((6, cx.shape[1]))
-    cx6[:5] = cx
-    cx6[5, 7] = 1.0  # v2 (mechanics velocity of the carrier)
-    kind = {"bouc-wen-hysteresis": 1, "quadratic-damping": 2, "coulomb-friction": 3}[
-        ool["kind"]
-    ]
-    par = np.asarray(ool["par"], dtype=float)
-    out = np.zeros((3, ref.size))
-    m = case.machine
-    _ool_loop(
-        ad,
-        bd,
-        cx6,
-        ac,
-        bc,
-        cc,
-        dc,
-        m.sensor.sensitivity,
-        nd,
-        frac,
-        np.ascontiguousarray(ref, dtype=float),
-        case.kt(ModelParams()),
-        case.tool_radius(),
-        1 if chip else 0,
-        kind,
-        par,
-        m.actuator.force_constant,
-        out,
+    p = ModelParams()
+    out = case.loop.simulate(
+        reference=np.ascontiguousarray(ref, dtype=float),
+        chip=ChipModel(case.kt(p), case.tool_radius(), 0.0) if chip else None,
+        nonlinearity=ool_nonlinearity(ool),
     )
-    return {"tool": out[0], "fe": out[1], "force": out[2]}
+    return {"tool": out["tool"], "fe": out["following_error"], "force": out["force"]}
 
 
 # ------------------------------------------------------------------ noise
@@ -746,11 +666,8 @@ def steady_peak_current(case) -> float:
     if "ipeak" not in _CASE:
         t = np.arange(int(0.1 * case.fs)) / case.fs
         u = case.simulate_path(ModelParams(), t)["u"]
-        # the limit acts on the demand applied after the fractional loop delay,
-        # (1 - frac) u[k] + frac u[k - 1]: a one-sample spike of u is halved there
-        frac = case.discrete(ModelParams())[4]
-        ua = (1.0 - frac) * u[1:] + frac * u[:-1]
-        _CASE["ipeak"] = float(np.max(np.abs(ua)) * case.machine.actuator.current_gain)
+        # the limit acts on the DAC command itself (ServoLoop's amplifier stage)
+        _CASE["ipeak"] = float(np.max(np.abs(u)) * case.machine.actuator.current_gain)
     return _CASE["ipeak"]
 
 

@@ -11,13 +11,19 @@
      overshoot);
    * ``force``: the thrust force ``k_t A(z)`` from the uncut chip section, computed
      each sample from the actual, deviated tool position, through the loop (the
-     difference of two loop runs with and without cutting);
+     difference of two loop runs with and without cutting); for facing and design
+     surfaces the steady facing chip at the (local) feed per revolution;
    * ``vibration``: a seeded realisation of the real positioning error spectrum
      (sensor noise, current noise and base vibration through the closed loop,
      including the structural modes).
 
    The parts add (the loop is linear; the chip force is computed inside the loop).
-   Hooks may add further terms outside the loop (``path_z``).
+   Hooks may add further terms outside the loop (``path_z``). Parts beyond the
+   loop (off by default, :mod:`servosurf._parts`): ``out-of-loop`` (frame motion
+   that bypasses the loop when the sensor targets the FTS base) and ``spindle``
+   (asynchronous spindle axial error) add to the tool height; ``ploughing``,
+   ``side-flow`` and ``recovery`` switch the kernel to the time-ordered sweep
+   with material rules.
 3. **Kernel** (:func:`servosurf.toolpath.sweep`): the exact lower envelope of the
    tool's nose arc in the radial-axial plane, on the field's grid.
 4. **Instrument** (optional): an interferometer model (resampling, optical blur,
@@ -39,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _progress
+from . import _parts, _progress
 from .cutting._force import ChipModel, Workpiece, facing_chip_area, load_workpiece
 from .errors import ConfigError
 from .metrology._surface import Surface
@@ -52,11 +58,20 @@ __all__ = [
     "realisation_study",
     "RealisationStudy",
     "PARTS",
+    "KINEMATIC",
+    "DEFAULT_PARTS",
     "SETTLE_TIME",
 ]
 
-#: Deviation parts that can be switched on and off.
-PARTS = ("tracking", "force", "vibration")
+#: Model parts that can be switched on and off: the servo loop's deviations, then
+#: (issue 18) the terms outside the loop and the material rules of the sweep.
+PARTS = _parts.ALL_PARTS
+#: Parts of a default simulation on the FTS (the servo loop's deviations).
+DEFAULT_PARTS = _parts.LOOP_PARTS
+#: The commanded path alone (no loop, no axis dynamics); not combined with PARTS.
+KINEMATIC = "kinematic"
+#: Default machine of NC programs: ideal machine axes (a kinematic run).
+NC_MACHINE = "sts-ideal-axes"
 #: Pre-roll before the first sample that can cut the field, in s (loop settling).
 SETTLE_TIME = 0.05
 #: Refuse a continuous time span longer than this many samples (memory guard).
@@ -79,7 +94,8 @@ class SimulationResult:
         Commanded tool height, m.
     deviation : dict of str to ndarray of shape (n,)
         Tool-height deviation per part (``tracking``, ``force``, ``vibration``,
-        ``hooks``), m; their sum is added to the commanded path.
+        ``hooks``, and ``out-of-loop``/``spindle`` when switched on), m; their sum
+        is added to the commanded path.
     force : ndarray of shape (n,)
         Thrust force on the tool, N.
     following_error : ndarray of shape (n,)
@@ -114,10 +130,13 @@ class SimulationResult:
 
 
 def _reach(spec, tool) -> float:
-    """Radial reach (m) of the tool arc below the pre-cut face."""
+    """Radial reach (m) of the tool arc below the pre-cut face (the whole arc for
+    paths without a depth of cut, such as NC programs)."""
     from .toolpath import field_reach
 
-    return field_reach(tool, spec.path.depth_of_cut)  # + 1 um margin for deviations
+    # + 1 um margin for deviations (a design path's deepest point may be far
+    # below its datum)
+    return field_reach(tool, getattr(spec.path, "max_depth", None))
 
 
 def _span(spec, tool) -> tuple[float, float]:
@@ -133,6 +152,64 @@ def _span(spec, tool) -> tuple[float, float]:
     return span
 
 
+def _kernel_field(spec):
+    """The field in the sweep kernel's frame (mirrored for some NC paths)."""
+    kf = getattr(spec.path, "kernel_field", None)
+    return spec.field if kf is None else kf(spec.field)
+
+
+def _initial(spec, workpiece):
+    """Pre-cut height for the sweep: the workpiece's, or no material limit (+inf)
+    for an NC program on a flat workpiece (a curved part's blank lies above the
+    path; the surface is the lower envelope of every cutting block)."""
+    if workpiece.precut.kind == "flat":
+        if spec.kind == "nc":
+            return np.inf
+        return float(workpiece.precut.height)
+    from .io import read_surface
+
+    return read_surface(workpiece.precut.file)
+
+
+def _physical(spec, surface):
+    """Undo the kernel frame (mirror) and mark never-cut pixels (+inf) as NaN."""
+    unmirror = getattr(spec.path, "unmirror", None)
+    if unmirror is None:
+        return surface
+    surface = unmirror(surface)
+    z = surface.z
+    if np.isinf(z).any():
+        surface = surface.replace(z=np.where(np.isinf(z), np.nan, z))
+    return surface
+
+
+def _design_force(path, tool, kt: float, t: np.ndarray) -> np.ndarray:
+    """Thrust force (N) of a design-surface finishing pass at times ``t`` (s).
+
+    The pre-form is taken to follow the design ``path.depth_of_cut`` higher, so the
+    chip is the steady facing chip at the local feed per revolution (planned feeds
+    vary with radius), ramped in over the record's first revolution.
+    """
+    feed = path.feed_at(t)
+    levels = np.unique(feed)
+    if levels.size > 64:
+        levels = np.linspace(levels[0], levels[-1], 64)
+    area = [facing_chip_area(tool.nose_radius, f, path.depth_of_cut) for f in levels]
+    ramp = np.clip((t - t[0]) * path.rev_per_s, 0.0, 1.0)
+    return kt * np.interp(feed, levels, area) * ramp
+
+
+def _check_nyquist(spec, fs: float) -> None:
+    """Refuse a toolpath motion frequency the controller cannot represent."""
+    f = getattr(spec.path, "frequency", None)
+    if f is not None and f >= fs / 2:
+        raise ConfigError(
+            f"{spec.kind}.frequency = {f:g} Hz is at or above the controller's "
+            f"Nyquist frequency {fs / 2:g} Hz (controller.sample-rate {fs:g} Hz): the "
+            "servo cannot follow it; FTS frequencies are Hz to a few kHz"
+        )
+
+
 def simulate(
     toolpath,
     *,
@@ -141,7 +218,7 @@ def simulate(
     bandwidth: float | None = None,
     mass: float | None = None,
     seed: int = 0,
-    parts: Sequence[str] = PARTS,
+    parts: Sequence[str] | None = None,
     instrument=None,
     hooks: Sequence[Any] = (),
     n_threads: int | None = None,
@@ -153,7 +230,8 @@ def simulate(
     toolpath : ToolpathSpec, str or Path
         Toolpath specification or TOML file.
     machine : Machine, str or Path, optional
-        Machine or machine file / built-in name (default: the seed prototype).
+        Machine or machine file / built-in name (default: the seed prototype; for
+        NC programs ``sts-ideal-axes``, ideal machine axes).
     workpiece : Workpiece, str or Path, optional
         Workpiece or file (default: electroless NiP, flat pre-cut face).
     bandwidth : float, optional
@@ -162,8 +240,12 @@ def simulate(
         Moving mass m1 + m2 in kg (default: the machine's).
     seed : int, default: 0
         Seed of the vibration realisation and the instrument noise.
-    parts : sequence of str, default: ("tracking", "force", "vibration")
-        Deviation parts to include (any subset of :data:`PARTS`).
+    parts : sequence of str, optional
+        Model parts to include: any subset of :data:`PARTS` (default:
+        :data:`DEFAULT_PARTS` for the FTS; ``("tracking", "vibration")`` for an NC
+        program on the FTS; ``("tracking",)`` on a second-order axis), or
+        ``("kinematic",)``: the commanded path alone, swept at its own resolution
+        (NC programs: the block end points) without the loop.
     instrument : Interferometer, str or None, optional
         Interferometer model applied to the machined map (None: no measurement model).
     hooks : sequence, optional
@@ -177,16 +259,25 @@ def simulate(
         The map, the deviations and the settings.
     """
     from .noise._synthesis import realise
-    from .toolpath import ToolpathSpec, check_clearance, load_toolpath, sample, sweep
+    from .toolpath import ToolpathSpec, check_clearance, load_toolpath, sample
 
-    bad = [p for p in parts if p not in PARTS]
-    if bad:
-        raise ConfigError(
-            f"unknown deviation part {bad[0]!r}; allowed: {', '.join(PARTS)}"
-        )
+    if parts is not None:
+        parts = tuple(parts)
+        bad = [p for p in parts if p not in (*PARTS, KINEMATIC)]
+        if bad:
+            raise ConfigError(
+                f"unknown deviation part {bad[0]!r}; allowed: {', '.join(PARTS)} "
+                f"or {KINEMATIC} alone"
+            )
+        if KINEMATIC in parts and len(parts) > 1:
+            raise ConfigError(
+                f"part {KINEMATIC!r} is the commanded path alone; it cannot be "
+                f"combined with {', '.join(p for p in parts if p != KINEMATIC)}")
     if not isinstance(seed, int | np.integer) or seed < 0:
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
     spec = toolpath if isinstance(toolpath, ToolpathSpec) else load_toolpath(toolpath)
+    if machine is None and spec.kind == "nc":
+        machine = NC_MACHINE
     if not isinstance(machine, Machine):
         machine = load_machine(machine)
     if mass is not None:
@@ -203,7 +294,19 @@ def simulate(
             tool = h.tool(tool)
     if tool is not spec.tool:
         spec = dataclasses.replace(spec, tool=tool)
+    if (parts is not None and KINEMATIC in parts) or machine.axis.model != "fts":
+        from ._simulate_axes import simulate_axes
+
+        return simulate_axes(spec, tool, machine, workpiece, parts, seed=int(seed),
+                             instrument=instrument, hooks=hooks, n_threads=n_threads)
+    if parts is None:
+        parts = ("tracking", "vibration") if spec.kind == "nc" else DEFAULT_PARTS
+    if spec.kind == "nc" and "force" in parts:
+        raise ConfigError(
+            "the cutting-force part needs the chip of a facing or lenslet path; for "
+            "an NC program use parts tracking and vibration, or kinematic")
     fs = machine.controller.sample_rate
+    _check_nyquist(spec, fs)
 
     with _progress.stage("servo loop"):
         loop = ServoLoop(machine)
@@ -214,7 +317,9 @@ def simulate(
             )
 
     t0, t1 = _span(spec, tool)
-    k0 = max(int(np.floor((t0 - SETTLE_TIME) * fs)), 0)
+    k0 = int(np.floor((t0 - SETTLE_TIME) * fs))
+    if spec.kind != "nc":  # an NC path holds its first point before t = 0
+        k0 = max(k0, 0)
     k1 = int(np.ceil(t1 * fs)) + 2
     n = k1 - k0
     if n > MAX_SPAN_SAMPLES:
@@ -244,6 +349,10 @@ def simulate(
                     chip=ChipModel(kt, tool.nose_radius, top),
                     chip_offset=offset,
                 )
+            elif spec.kind == "surface":  # finishing pass: facing chip, local feed
+                cut = loop.simulate(
+                    reference=ref, force=_design_force(spec.path, tool, kt, t)
+                )
             else:  # facing: steady feed-limited chip, ramped in over one revolution
                 p = spec.path
                 area = facing_chip_area(
@@ -264,6 +373,8 @@ def simulate(
             fol += real.following
         else:
             dev["vibration"] = np.zeros(n)
+        # parts outside the loop (issue 18): out-of-loop frame motion, spindle error
+        dev.update(_parts.outside_loop(loop, parts, n, seed))
         extra = np.zeros(n)
         for h in hooks:
             if hasattr(h, "path_z"):
@@ -273,9 +384,10 @@ def simulate(
                 )
         dev["hooks"] = extra
 
+    kfield = _kernel_field(spec)
     with _progress.stage("toolpath samples over the field"):
         path = sample(
-            spec, fs=fs, field=spec.field, tool=tool, reach=_reach(spec, tool)
+            spec, fs=fs, field=kfield, tool=tool, reach=_reach(spec, tool)
         )
         idx = path.index - k0
         if idx.size and (idx.min() < 0 or idx.max() >= n):
@@ -285,14 +397,10 @@ def simulate(
         check_clearance(path, tool)
 
     with _progress.stage(f"kernel on {spec.field.ny} x {spec.field.nx} grid"):
-        initial = None
-        if workpiece.precut.kind == "flat":
-            initial = float(workpiece.precut.height)
-        else:
-            from .io import read_surface
-
-            initial = read_surface(workpiece.precut.file)
-        surface = sweep(path, tool, spec.field, initial=initial, n_threads=n_threads)
+        # material parts (issue 18) switch to the time-ordered sweep
+        surface = _parts.machine_surface(path, tool, kfield, _initial(spec, workpiece),
+                                         workpiece, parts, n_threads=n_threads)
+        surface = _physical(spec, surface)
 
     ctx = {
         "spec": spec,
@@ -320,7 +428,10 @@ def simulate(
         "specific_thrust_pressure_pa": workpiece.material.specific_thrust_pressure,
         "controller_rate_hz": fs,
         "hooks": [type(h).__name__ for h in hooks],
+        **_parts.part_settings(machine, tool, workpiece, parts),
     }
+    if spec.kind == "nc":
+        settings["nc"] = spec.path.describe()
     surface = surface.replace(metadata={**surface.metadata, "simulation": settings})
     measured = None
     if instrument is not None:
@@ -351,6 +462,7 @@ def simulate(
 #: Scalar metrics of :func:`realisation_study`, each in SI (m, s, N).
 REALISATION_METRICS = (
     "form_error_max_m",
+    "form_error_rim_max_m",
     "form_error_rms_m",
     "ra_m",
     "sa_m",
@@ -371,7 +483,9 @@ class RealisationStudy:
     metrics : dict of str to ndarray of shape (k,)
         Per seed, the scalar metrics of :data:`REALISATION_METRICS` (SI; NaN where
         the analysis has none, e.g. no form error on a flat face) and
-        ``peak1_per_m`` / ``peak2_per_m``, the two strongest spectral peaks (1/m).
+        ``peak1_per_m`` / ``peak2_per_m``, the frequencies (1/m) of the two
+        strongest spectral lines, matched by frequency across the seeds (NaN for a
+        seed without that line; see ``_match_lines``).
     """
 
     seeds: np.ndarray
@@ -427,9 +541,47 @@ def _realisation_metrics(toolpath, kwargs: dict, seed: int) -> dict:
     for k in REALISATION_METRICS:
         v = summary.get(k)
         out[k] = float("nan") if v is None else float(v)
-    peaks = list(summary.get("spectrum_peaks_per_m") or [])
-    for i in (0, 1):
-        out[f"peak{i + 1}_per_m"] = float(peaks[i]) if len(peaks) > i else float("nan")
+    found = (summary.get("_plots") or {}).get("spectrum", (None, None, []))[2]
+    out["_peaks"] = [(float(q["freq_per_m"]), float(q.get("psd_m3", 1.0)))
+                     for q in found or []]
+    return out
+
+
+#: Peaks of two realisations within this relative distance are the same line.
+LINE_TOLERANCE = 0.05
+
+
+def _match_lines(peaks: list[list[tuple[float, float]]], n_lines: int = 2) -> dict:
+    """Per-seed frequencies of the same spectral lines, matched by frequency.
+
+    The peaks of all seeds are grouped into lines (a peak joins a line whose median
+    frequency lies within :data:`LINE_TOLERANCE`); lines found in at least half of
+    the seeds are ranked by their median PSD, strongest first. ``peak{k}_per_m`` of
+    a seed is its peak on line k (NaN when that seed has none), so the statistics
+    average one line, not whichever peak came second in each seed.
+    """
+    lines: list[dict] = []  # {"f": [...], "p": [...], "seeds": [...]}
+    flat = sorted((f, p, i) for i, pk in enumerate(peaks) for f, p in pk)
+    for f, p, i in flat:
+        near = [ln for ln in lines
+                if abs(f - np.median(ln["f"])) <= LINE_TOLERANCE * f and i not in
+                ln["seeds"]]
+        if near:
+            near[0]["f"].append(f)
+            near[0]["p"].append(p)
+            near[0]["seeds"].append(i)
+        else:
+            lines.append({"f": [f], "p": [p], "seeds": [i]})
+    k = len(peaks)
+    common = [ln for ln in lines if 2 * len(ln["seeds"]) >= k]
+    common.sort(key=lambda ln: -float(np.median(ln["p"])))
+    out = {}
+    for j in range(n_lines):
+        col = np.full(k, np.nan)
+        if j < len(common):
+            for f, i in zip(common[j]["f"], common[j]["seeds"], strict=True):
+                col[i] = f
+        out[f"peak{j + 1}_per_m"] = col
     return out
 
 
@@ -477,5 +629,7 @@ def realisation_study(toolpath, *, seeds: Sequence[int], client=None, progress=N
     spec = toolpath if isinstance(toolpath, ToolpathSpec) else load_toolpath(toolpath)
     task = functools.partial(_realisation_metrics, spec, kwargs)
     rows = map_tasks(task, seeds, client=client, progress=progress)
+    peaks = [r.pop("_peaks") for r in rows]
     metrics = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0]}
+    metrics.update(_match_lines(peaks))
     return RealisationStudy(np.array(seeds, dtype=np.int64), metrics)

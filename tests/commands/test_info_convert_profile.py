@@ -67,6 +67,44 @@ def test_info_json_real_files(zygo_dir, capsys, name):
     assert info["metadata"]["source_format"] == info["format"]
 
 
+AREAL_KEYS = (
+    "sa_m sq_m sp_m sv_m sz_m ssk sku sdq sdr_percent sal_m str sk_m spk_m svk_m "
+    "smr1_percent smr2_percent"
+).split()
+
+
+def test_info_json_areal_parameters_match_surfalize(zygo_dir, capsys):
+    import warnings
+
+    surfalize = pytest.importorskip("surfalize")
+    name = "newview_20x_mirau_mp8.1_metropro-1.dat"  # void-free, tilted map
+    info = _json(capsys, ["info", str(zygo_dir / name), "--json"])
+    areal = info["areal"]
+    assert set(areal) >= set(AREAL_KEYS)
+    assert areal["form"] == "mean" and areal["cutoff_m"] is None
+    s = read_surface(zygo_dir / name)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # surfalize: Str undefined on this map
+        sf = surfalize.Surface(s.z * 1e6, s.dx * 1e6, s.dy * 1e6)  # um
+        ref = {"sp_m": sf.Sp() * 1e-6, "sv_m": sf.Sv() * 1e-6, "sdq": sf.Sdq()}
+        ref |= {"sk_m": sf.Sk() * 1e-6, "sal_m": sf.Sal() * 1e-6}
+        assert np.isnan(sf.Str()) and areal["str"] is None  # JSON null: undefined
+    # same formulas (1e-12) except Sal (interpolation, 1 %) and Sk (surfalize's
+    # 10 000-class material ratio curve, 5e-3): see tests/metrology
+    for key, rtol in (("sp_m", 1e-12), ("sv_m", 1e-12), ("sdq", 1e-12)):
+        np.testing.assert_allclose(areal[key], ref[key], rtol=rtol, err_msg=key)
+    np.testing.assert_allclose(areal["sal_m"], ref["sal_m"], rtol=1e-2)
+    np.testing.assert_allclose(areal["sk_m"], ref["sk_m"], rtol=5e-3)
+
+
+def test_info_text_areal_lines(zygo_dir, capsys):
+    name = "mx_export_hdrfmt1_nolatres_20191018_flat01.dat"  # uncalibrated
+    assert main(["info", str(zygo_dir / name)]) == 0
+    out = capsys.readouterr().out
+    assert "Sdq / Sdr      undefined / undefined %" in out
+    assert "Sk / Spk / Svk" in out and "Smr1" in out
+
+
 def test_info_text(zygo_dir, capsys):
     assert main(["info", str(zygo_dir / "newview_20x_mirau_mp8.1_metropro-1.dat")]) == 0
     out = capsys.readouterr().out

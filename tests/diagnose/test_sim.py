@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 
 from servosurf.diagnose._catalogue import CATALOGUE
 from servosurf.diagnose._sim import CaseModel, ModelParams
@@ -70,3 +71,60 @@ def test_elastic_recovery_is_never_negative():
     eff = next(e for e in CATALOGUE if e.name == "elastic-recovery")
     (f,) = eff.free(ModelParams(), 0, None)
     assert f.lo == 0.0 and f.hi > 0.0
+
+
+# ------------------------------------------------------------ one loop model
+_CONTRACT = {
+    "nominal": (ModelParams(), None, None),
+    "mode": (ModelParams(mode_frequency=6100.0, mode_damping=0.03, mode_gain=2e-8),
+             "modes", None),
+    "delay": (ModelParams(extra_delay=1.3e-6), "delay", None),
+    "recalibration": (ModelParams(moving_mass=0.16, flexure_stiffness=2.5e4,
+                                  force_constant=7.5, sensor_bandwidth=18e3),
+                      "recal", None),
+    "nonlinear": (ModelParams(max_current=0.4, kf_b1=2e3, flexure_k3=3e13),
+                  None, "nl"),
+}
+
+
+def _independent_perturbation(kind):
+    from servosurf.servo import LoopPerturbation, StructuralMode
+
+    if kind == "modes":
+        return LoopPerturbation(modes=(StructuralMode(6100.0, 0.03, 2e-8),))
+    if kind == "delay":
+        return LoopPerturbation(extra_delay=1.3e-6)
+    if kind == "recal":
+        return LoopPerturbation(moving_mass=0.16, flexure_stiffness=2.5e4,
+                                force_constant=7.5, sensor_bandwidth=18e3)
+    return None
+
+
+
+@pytest.mark.parametrize("name", sorted(_CONTRACT))
+def test_case_model_is_the_servo_loop(name):
+    """The diagnosis's model of a case is the simulator's loop (FRF and time)."""
+    from servosurf.servo import Nonlinearity, ServoLoop
+
+    p, pert_kind, nl_kind = _CONTRACT[name]
+    m = _nominal()
+    case = CaseModel(m)
+    loop = ServoLoop(m)
+    pert = _independent_perturbation(pert_kind)
+    nl = (Nonlinearity(max_current=0.4, kf_b1=2e3, flexure_k3=3e13)
+          if nl_kind else None)
+    f = np.geomspace(20.0, 80e3, 120)
+    got = case.paths(p, f)
+    frf = loop.frf(f, perturbation=pert)
+    for (inp, out), h in frf.paths.items():
+        key = (inp, "fe" if out == "following_error" else out)
+        np.testing.assert_array_equal(got[key], h, err_msg=str(key))
+    np.testing.assert_array_equal(got["open_loop"],
+                                  loop.open_loop(f, perturbation=pert))
+    t = np.arange(3000) / case.fs
+    cmd = 10e-6 * np.sin(2 * np.pi * 100.0 * t)
+    a = case.simulate(p, reference=cmd)
+    b = loop.simulate(reference=cmd, perturbation=pert, nonlinearity=nl)
+    np.testing.assert_array_equal(a["fe"], b["following_error"])
+    np.testing.assert_array_equal(a["tool"], b["tool"])
+    assert case.is_stable(p) == loop.is_stable(perturbation=pert)

@@ -25,7 +25,7 @@ from servosurf.metrology import Surface
 
 from ._helpers import metropro_dat, zygo_ascii, zygo_xyz
 
-#: Hypothesis examples per reader (7 readers: about 1000 in all, about 5 s). Set
+#: Hypothesis examples per reader (8 readers: about 1100 in all, about 6 s). Set
 #: SERVOSURF_FUZZ_EXAMPLES for a longer, randomised run (e.g. nightly).
 EXAMPLES = int(os.environ.get("SERVOSURF_FUZZ_EXAMPLES", "140"))
 DERANDOMIZE = "SERVOSURF_FUZZ_EXAMPLES" not in os.environ
@@ -40,12 +40,22 @@ _SHARED = Path(
     )
 )
 ZYGO = _SHARED / "data" / "zygo"
+UPM = _SHARED / "data" / "upm_sts"
 READERS = sorted(f.name for f in formats() if f.readable)
 
 
 def _real(name: str) -> list[bytes]:
     p = ZYGO / name
     return [p.read_bytes()] if p.is_file() else []
+
+
+def _upm(name: str) -> bytes:
+    """The first lines of a real file of ../shared/data/upm_sts, made consistent."""
+    p = UPM / name
+    if not p.is_file():
+        return b"mm\n2\n0.0, 0.0\n0.001, 0.0\n"
+    lines = p.read_bytes().splitlines()[2:102]
+    return b"\r\n".join([b"mm", str(len(lines)).encode(), *lines]) + b"\r\n"
 
 
 def _seeds() -> dict[str, list[bytes]]:
@@ -57,7 +67,12 @@ def _seeds() -> dict[str, list[bytes]]:
     csv = "X ,Y ,Slice\n" + "".join(
         f"{0.871 * (i + 1)!r},{0.01 * float(np.sin(i))!r},Slice 1\n" for i in range(40)
     )
+    contour = "mm\n40\n" + "".join(
+        f"{0.001 * (20 - i):20.15f},{0.0001 * float(np.cos(i)):20.15f}\n"
+        for i in range(40)
+    )
     return {
+        "formtracer": [contour.encode(), _upm("1022/1022-contour.DAT")],
         "metropro_dat": [
             encode_surface(s, "metropro_dat"),
             metropro_dat(

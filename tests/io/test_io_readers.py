@@ -124,7 +124,8 @@ def surfaces(zygo_dir):
 
 def test_every_registered_reader_has_a_real_file():
     readers = {f.name for f in formats() if f.readable}
-    covered = {v[0] for v in REFERENCE.values()} | {"mx_profile_csv"}
+    # formtracer: the real contour of ../shared/data/upm_sts (test_formtracer.py)
+    covered = {v[0] for v in REFERENCE.values()} | {"mx_profile_csv", "formtracer"}
     # zygo_xyz and npz have no public instrument file; they are covered by
     # synthetic files (test_io_synthetic.py) and writer round trips.
     assert readers - covered == {"zygo_xyz", "npz"}
@@ -303,6 +304,7 @@ def test_formats_listing():
         "x3p",
         "npz",
         "mx_profile_csv",
+        "formtracer",
     }
     assert {n for n, f in info.items() if f.writable} == {
         "metropro_dat",
@@ -312,4 +314,5 @@ def test_formats_listing():
         "npz",
     }
     assert info["mx_profile_csv"].kind == "profile"
+    assert info["formtracer"].kind == "profile"
     assert info["datx"].suffixes == (".datx",)

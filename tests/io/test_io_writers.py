@@ -146,7 +146,7 @@ def test_unknown_suffix_and_options(tmp_path):
         write_surface(s, tmp_path / "a.dat", phase_ress=2)
 
 
-def test_profile_is_written_as_one_row(tmp_path):
+def test_profile_in_x3p_reads_as_one_row_map(tmp_path):
     p = Profile(np.sin(np.arange(50) / 5) * 1e-8, 1e-6, x0=3e-6)
     write_surface(p, tmp_path / "p.x3p")
     back = read_surface(tmp_path / "p.x3p")

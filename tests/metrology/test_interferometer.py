@@ -289,3 +289,20 @@ def test_metadata():
     assert md["pixel_size_m"] == P and md["noise_rms_m"] == NV20.noise_rms
     assert md["seed"] == 5 and md["magnification"] == 20.0
     assert s.metadata == {"source": "sim"}
+
+
+def test_instrument_noise_is_not_the_vibration_stream():
+    """The height noise draws its own stream of the seed, not default_rng(seed)."""
+    import numpy as np
+
+    from servosurf.metrology import Surface
+    from servosurf.metrology._interferometer import Interferometer, measure
+
+    flat = Surface(np.zeros((64, 64)), 0.549e-6, 0.549e-6)
+    inst = Interferometer(noise_rms=1e-9, dropout_fraction=0.0, camera_nx=64,
+                          camera_ny=64)
+    m = measure(flat, inst, seed=3)
+    shared = np.random.default_rng(3).standard_normal(m.z.shape) * 1e-9
+    assert abs(np.corrcoef(m.z.ravel(), shared.ravel())[0, 1]) < 0.1
+    again = measure(flat, inst, seed=3)
+    np.testing.assert_array_equal(m.z, again.z)

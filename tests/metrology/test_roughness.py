@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,12 @@ from servosurf.metrology import (
     profile_roughness,
 )
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
+# like tests/conftest.py: SERVOSURF_SHARED, else the checkout's ../shared
+SHARED = Path(
+    os.environ.get(
+        "SERVOSURF_SHARED", Path(__file__).resolve().parents[2].parent / "shared"
+    )
+)
 NEXVIEW_CSV = SHARED / "data" / "zygo" / "nexview_nx2_diamond_turned_1016-WLI-2D.csv"
 
 #: Relative tolerance on the NexView reference values (brief: 0.5 %).

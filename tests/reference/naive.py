@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sweep", "arc_height", "crop_mask", "max_slope", "bucket_ranges"]
+__all__ = ["sweep", "ordered_sweep", "arc_height", "crop_mask", "max_slope",
+           "bucket_ranges"]
 
 
 def arc_height(zc, dr, radius, wav=None):
@@ -97,6 +98,80 @@ def sweep(t, theta, r, z, fs, x, y, radius, half_width, initial, wav=None):
                                          wav)[0])
                     best = min(best, h)
             out[i, j] = best
+    return out
+
+
+def ordered_sweep(t, theta, r, z, fs, x, y, radius, half_width, initial, rules,
+                  wav=None):
+    """The swept arc applied pass by pass in time order with material rules.
+
+    Parameters
+    ----------
+    t, theta, r, z, fs, x, y, radius, half_width, initial, wav
+        As for :func:`sweep`.
+    rules : sequence of 5 float
+        ``(h_min, a, b, d0, h_d)`` in m: minimum chip thickness, side-flow ridge
+        height and half-width, recovery at zero thickness and its decay thickness.
+
+    Returns
+    -------
+    ndarray of shape (ny, nx)
+        Machined height, in m.
+
+    Notes
+    -----
+    Every crossing of a point (direct, and across the axis) is listed with its
+    angle, sorted (the angle grows with time) and applied in that order: with
+    ``h = s - z_e``, a cut (``h > h_min``) sets ``s = z_e + min(h, d0 exp(-h/h_d))``
+    and stores the edge slope ``sign (q - r_c) / R`` of the pass; otherwise, at a
+    distance ``d = (h_min - h) / |slope - stored slope| < b`` the ridge
+    ``a (1 - d / b)`` is added.
+    """
+    h_min, a, b, d0, hd = (float(v) for v in rules)
+    n = theta.size
+    gap = np.zeros(n, dtype=bool)
+    gap[:-1] = np.diff(t) > 1.5 / fs
+    out = np.array(initial, dtype=float, copy=True)
+    for i, yy in enumerate(y):
+        for j, xx in enumerate(x):
+            s = out[i, j]
+            if np.isnan(s) or n < 2:
+                continue
+            rp = np.hypot(xx, yy)
+            ang = np.arctan2(yy, xx)
+            events = []  # (angle, signed query radius, sign of the slope)
+            for phi, rq, sign in ((ang, rp, 1.0), (ang + np.pi, -rp, -1.0)):
+                k_lo = int(np.ceil((theta[0] - phi) / (2 * np.pi)))
+                k_hi = int(np.floor((theta[-1] - phi) / (2 * np.pi)))
+                for k in range(k_lo, k_hi + 1):
+                    events.append((phi + 2 * np.pi * k, rq, sign))
+            events.sort()
+            slope_s = 0.0
+            for target, rq, sign in events:
+                if target < theta[0] or target > theta[-1]:
+                    continue
+                m = min(int(np.searchsorted(theta, target, side="right")) - 1, n - 2)
+                if gap[m]:
+                    continue
+                f = (target - theta[m]) / (theta[m + 1] - theta[m])
+                f = min(max(f, 0.0), 1.0)
+                rc = r[m] + f * (r[m + 1] - r[m])
+                dr = rq - rc
+                if abs(dr) > half_width:
+                    continue
+                zc = z[m] + f * (z[m + 1] - z[m])
+                ze = float(arc_height(np.array([zc]), np.array([dr]), radius, wav)[0])
+                h = s - ze
+                slope = sign * dr / radius
+                if h > h_min:
+                    rec = min(h, d0 * np.exp(-h / hd)) if (d0 > 0 and hd > 0) else 0.0
+                    s = ze + rec
+                    slope_s = slope
+                elif a > 0 and b > 0 and abs(slope - slope_s) > 0:
+                    d = (h_min - h) / abs(slope - slope_s)
+                    if d < b:
+                        s = s + a * (1.0 - d / b)
+            out[i, j] = s
     return out
 
 

@@ -46,6 +46,21 @@ def test_identical_maps_are_a_perfect_fit(lens_map):
     assert out["fit_percent"] == pytest.approx(100.0, abs=1e-6)
 
 
+def test_compare_areal_parameters_on_common_pixels(lens_map):
+    # the "measured" map is the simulation plus a tilt, with a void block: after
+    # the same form removal on the same pixels, both columns must agree
+    yy, xx = np.mgrid[0 : lens_map.shape[0], 0 : lens_map.shape[1]]
+    z = lens_map.z + 3e-9 * xx - 2e-9 * yy
+    z[20:60, 30:90] = np.nan
+    out = compare_surfaces(lens_map.replace(z=z), lens_map, register=False)
+    m, s = out["areal"]["measured"], out["areal"]["simulated"]
+    assert m["n_valid"] == s["n_valid"] == np.isfinite(z).sum()
+    for key in ("sa_m", "sq_m", "sz_m", "ssk", "sdq", "sal_m", "sk_m", "spk_m"):
+        # identical surfaces up to the rounding of the fitted tilt
+        np.testing.assert_allclose(m[key], s[key], rtol=1e-6, err_msg=key)
+    assert "piston tilt" in out["areal"]["evaluated_on"]
+
+
 def test_compare_cli_files(lens_map, tmp_path, capsys):
     import json
 
@@ -62,6 +77,8 @@ def test_compare_cli_files(lens_map, tmp_path, capsys):
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(out["shift_px"], [1.3, 0.4], atol=SHIFT_PX_TOL)
+    for side in ("measured", "simulated"):
+        assert out["areal"][side]["sq_m"] > 0 and "sdr_percent" in out["areal"][side]
     for name in ("residual.png", "spectra.png", "profiles.png", "compare.json"):
         assert (tmp_path / "c" / name).stat().st_size > 0
     assert main(["compare", str(tmp_path / "nope.x3p"), "--simulated",

@@ -14,9 +14,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
         description="Read a surface or profile file (MetroPro .dat/.asc, ZYGO .xyz, Mx "
         ".datx, .x3p, .npz, Mx profile .csv) and report its format, shape, pixel "
         "size, invalid fraction, height range, Sa and Sq over the valid pixels (about "
-        "the mean, no levelling), Sq after a least-squares plane, and its metadata. "
-        "Text output "
-        "uses um and nm; --json gives SI values (m).",
+        "the mean, no levelling), Sq after a least-squares plane, the ISO 25178-2 "
+        "areal parameters (Sp Sv Sz Ssk Sku Sdq Sdr Sal Str Sk Spk Svk Smr1 Smr2, "
+        "mean removed, no levelling or filter) and its metadata. Text output "
+        "uses um and nm; --json gives SI values (m; Sdr, Smr1, Smr2 in %).",
     )
     p.add_argument("file", metavar="FILE", help="file to describe")
     p.add_argument(
@@ -34,7 +35,7 @@ def describe(obj: Any, fmt: str) -> dict[str, Any]:
     """Summary of a Surface or Profile as a JSON-ready dict (lengths in m)."""
     import numpy as np
 
-    from ..metrology import Profile
+    from ..metrology import Profile, areal_parameters
 
     valid = np.isfinite(obj.z)
     v = obj.z[valid]
@@ -72,6 +73,7 @@ def describe(obj: Any, fmt: str) -> dict[str, Any]:
                 "sa_m": obj.sa(),
                 "sq_m": obj.sq(),
                 "sq_plane_m": obj.level().sq(),
+                "areal": areal_parameters(obj),
             }
         )
     out["metadata"] = dict(obj.metadata)
@@ -105,6 +107,25 @@ def _text(info: dict[str, Any], path: str) -> str:
             "(about the mean, no levelling)"
         )
         lines.append(f"  Sq after plane {info['sq_plane_m'] * nm:.4f} nm")
+        a = info["areal"]
+
+        def q(key: str, scale: float = 1.0, fmt: str = ".4g") -> str:
+            v = a[key]
+            return "undefined" if v is None or v != v else format(v * scale, fmt)
+
+        lines.append(
+            f"  Sp / Sv / Sz   {q('sp_m', nm, '.4f')} / {q('sv_m', nm, '.4f')} / "
+            f"{q('sz_m', nm, '.4f')} nm; Ssk {q('ssk')}, Sku {q('sku')}"
+        )
+        lines.append(
+            f"  Sdq / Sdr      {q('sdq')} / {q('sdr_percent')} %; "
+            f"Sal {q('sal_m', um)} um, Str {q('str')} (ACF threshold 0.2)"
+        )
+        lines.append(
+            f"  Sk / Spk / Svk {q('sk_m', nm, '.4f')} / {q('spk_m', nm, '.4f')} / "
+            f"{q('svk_m', nm, '.4f')} nm; Smr1 {q('smr1_percent')} %, "
+            f"Smr2 {q('smr2_percent')} %"
+        )
     else:
         lines.append(
             f"  Pa / Pq        {info['pa_m'] * nm:.4f} / {info['pq_m'] * nm:.4f} nm "

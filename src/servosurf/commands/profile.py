@@ -32,6 +32,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "trimming one cut-off length at each end",
     )
     p.add_argument(
+        "--x-range",
+        metavar=("MIN", "MAX"),
+        type=float,
+        nargs=2,
+        help="evaluate only MIN <= x <= MAX, in m in the file's own coordinates "
+        "(e.g. -0.00099 0.00099 for the cut zone of a stylus contour that also "
+        "holds the part's flanks; a negative MIN in plain decimals)",
+    )
+    p.add_argument(
         "--format",
         metavar="FMT",
         help="format name or suffix (default: detect from content and suffix)",
@@ -51,12 +60,17 @@ def run(args) -> int:
         None if args.cutoff is None else check_positive(args.cutoff, name="--cutoff")
     )
     prof = read_profile(args.file, format=args.format)
+    if args.x_range is not None:
+        from ..metrology import crop_profile
+
+        prof = crop_profile(prof, *args.x_range)
     res = profile_roughness(prof, cutoff=cutoff, trim_ends=not args.keep_ends)
     out = {
         "file": args.file,
         "points": int(prof.z.size),
         "dx_m": prof.dx,
         "length_m": prof.z.size * prof.dx,
+        "x_range_m": None if args.x_range is None else list(args.x_range),
         **res,
     }
     if args.json:

@@ -25,6 +25,7 @@ __all__ = [
     "Precut",
     "Workpiece",
     "load_workpiece",
+    "builtin_workpieces",
     "ChipModel",
     "segment_area",
     "facing_chip_area",
@@ -42,11 +43,13 @@ class Material:
 
     name: str = param("Electroless plated NiP alloy", doc="material name")
     specific_thrust_pressure: float = param(
-        1.016e9,
+        1265621909.1639545,
         unit="Pa",
         low=0.0,
+        plausible=(1e7, 1e11),
         doc="thrust force per uncut chip area, k_t",
-        source="calibrated to seed paper Fig. 17b (295 nm peak deviation)",
+        source="target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation; "
+        "servosurf.calibration.solve_thrust_pressure)",
     )
     specific_cutting_pressure: float = param(
         3.5e9,
@@ -55,7 +58,60 @@ class Material:
         doc="tangential force per uncut chip area",
         source="assumed; reported only",
     )
-    source: str = param("", doc="where the coefficients come from")
+    source: str = param(
+        "target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation)",
+        doc="where the coefficients come from",
+    )
+    # -- material parts of the forward model (switched on by simulate's parts
+    # "ploughing", "side-flow" and "recovery"); heights scale with the tool's
+    # cutting-edge radius r_n (tool.edge-radius)
+    min_chip_thickness_ratio: float = param(
+        0.25,
+        unit="",
+        low=0.0,
+        high=1.0,
+        doc="h_min / r_n: minimum chip thickness over the cutting-edge radius",
+        source="ductile metals cut with diamond: 0.2-0.4 (Yuan, Zhou, Dong, J. Mater. "
+        "Process. Technol. 62 (1996) 327; Son, Lim, Ahn, Int. J. Mach. Tools Manuf. "
+        "45 (2005) 529); not measured for NiP",
+    )
+    side_flow_height_ratio: float = param(
+        0.05,
+        unit="",
+        low=0.0,
+        high=1.0,
+        doc="a / r_n: side-flow ridge height at the cut boundary over r_n",
+        source="assumed; side flow at the feed-mark ridges: Liu & Melkote, Int. J. "
+        "Mach. Tools Manuf. 46 (2006) 1778; Zong et al., ibid. 84 (2014) 58",
+    )
+    side_flow_width_ratio: float = param(
+        10.0,
+        unit="",
+        low=0.0,
+        high=1000.0,
+        doc="b / r_n: lateral half-width of the side-flow ridge over r_n",
+        source="assumed (ridge about ten edge radii wide)",
+    )
+    recovery_ratio: float = param(
+        0.1,
+        unit="",
+        low=0.0,
+        high=1.0,
+        doc="d0 / r_n: elastic recovery of a cut surface at vanishing chip thickness",
+        source="assumed, of the order of a few H/E of the edge radius: electroless "
+        "NiP H 5-7 GPa, E 100-200 GPa (Weil & Parker, in Mallory & Hajdu, "
+        "Electroless Plating, AESF 1990, ch. 4); swelling and recovery in diamond "
+        "turning: Kong, Lee, Cheung, To, J. Mater. Process. Technol. 180 (2006) 210",
+    )
+    recovery_decay_ratio: float = param(
+        1.0,
+        unit="",
+        low=0.0,
+        low_open=True,
+        high=100.0,
+        doc="h_d / r_n: chip thickness over which the recovery decays, over r_n",
+        source="assumed (the edge radius sets where ploughing gives way to cutting)",
+    )
 
 
 @dataclass(frozen=True)
@@ -83,14 +139,25 @@ class Workpiece:
             )
 
 
-def load_workpiece(source: str | Path | None = None) -> Workpiece:
-    """Load a workpiece TOML file (``None``: the electroless NiP defaults).
+def builtin_workpieces() -> dict[str, Path]:
+    """Return ``{name: path}`` of the workpiece files shipped with servosurf."""
+    from .._builtins import builtin_files
 
-    Relative ``precut.file`` paths resolve against the TOML file's folder.
+    return builtin_files("workpiece")
+
+
+def load_workpiece(source: str | Path | None = None) -> Workpiece:
+    """Load a workpiece TOML file or built-in (``None``: the electroless NiP defaults).
+
+    ``source`` is a path or the name of a built-in workpiece (see
+    :func:`builtin_workpieces`, e.g. ``"nip"``). Relative ``precut.file`` paths
+    resolve against the TOML file's folder.
     """
+    from .._builtins import resolve_file
+
     if source is None:
         return Workpiece()
-    path = Path(source)
+    path = resolve_file(source, kind="workpiece")
     data = load_toml(path)
     try:
         wp = from_mapping(Workpiece, data)

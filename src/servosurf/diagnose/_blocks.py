@@ -51,6 +51,20 @@ FRF_FLOOR = 1e-3
 MAP_FLOOR = 0.05e-9
 #: Points closer than this to the uncut top are left out (cut edge), m.
 EDGE_MARGIN = 30e-9
+#: Cut points whose runner-up pass lies less than this many standard deviations
+#: of the two passes' tool-noise difference above the active pass are left out.
+AMBIGUITY_SIGMAS = 4.0
+#: Fewer instrument-only values (within intervals and on the uncut top) than this
+#: (or than half the interval statistics) and the instrument sigma is estimated by
+#: maximum likelihood of the statistics too.
+MIN_SIGMA_POINTS = 2000
+#: Range of the tool-noise power scale profiled from a map (a factor 2 on a
+#: disturbance PSD is a recalibration, not physics: DISCOVERY.md, issue 19).
+TOOL_SCALE_BOUNDS = (0.5, 2.0)
+#: Segments (revolutions) used by the maximum-likelihood estimates.
+ML_SEGMENTS = 24
+#: Points closer than this to the cut boundary (in the plane) are left out, m.
+EDGE_BAND = 2e-6
 #: At most this many uncut points of a map are used.
 MAX_UNCUT = 20000
 
@@ -648,8 +662,14 @@ class FRFBlock(Block):
         return float(np.exp(np.mean(np.log(np.abs(self.frf / h)))))
 
 
-def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
-    """Autocovariance (m^2) of the stochastic tool error at ``lags`` (s)."""
+def tool_autocov_table(ctx: Context, p: ModelParams) -> np.ndarray:
+    """Autocovariance (m^2) of the stochastic tool error at integer sample lags.
+
+    ``table[k]`` is the covariance at lag ``k / fs`` of the controller-rate tool
+    error, from the synthesised real-error PSD above ``fs / 4096`` (the one
+    :func:`servosurf.noise.realise` draws ``simulate``'s vibration from), on a
+    periodic grid of 2^17 samples (0.66 s at 199.6 kHz).
+    """
     fs = ctx.case.fs
 
     def table():
@@ -660,10 +680,19 @@ def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
         r = np.fft.irfft(s, n) * fs / 2.0
         return r[: n // 2]
 
-    r = ctx.memo((p.key(("linear", "sensor_noise")), "toolcov"), table)
-    k = np.abs(np.asarray(lags)) * fs
-    out = np.interp(k, np.arange(r.size), r, right=0.0)
-    return out
+    return ctx.memo((p.key(("linear", "sensor_noise")), "toolcov"), table)
+
+
+def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
+    """Autocovariance (m^2) of the stochastic tool error at ``lags`` (s)."""
+    r = tool_autocov_table(ctx, p)
+    k = np.abs(np.asarray(lags)) * ctx.case.fs
+    return np.interp(k, np.arange(r.size), r, right=0.0)
+
+
+#: Cut points whose pass times are further apart than this (s) are treated as
+#: independent noise segments (different revolutions or rings).
+SEGMENT_GAP = 0.02
 
 
 class PointsBlock(Block):
@@ -716,11 +745,27 @@ class PointsBlock(Block):
         traj = ctx.trajectory(p0)
         from ._surface import surface_heights
 
-        h0, k0, hmin = surface_heights(case, pts, p0, traj, return_pass=True)
+        h0, k0, hmin, gap = surface_heights(case, pts, p0, traj, return_pass=True)
         self.pts_all = pts
         cut = k0 >= 0
-        # leave out the cut edge (where the boundary moves with any effect)
-        keep = ~(np.abs(hmin) < EDGE_MARGIN)
+        # leave out the cut edge (where the boundary moves with any effect) and
+        # the points two passes compete for (cusps of a facing cut): there the
+        # tool noise decides which pass leaves the surface, a min of two noisy
+        # heights the Gaussian model cannot describe
+        rt = tool_autocov_table(ctx, p0)
+        ambiguous = gap < AMBIGUITY_SIGMAS * math.sqrt(2.0 * max(rt[0], 0.0))
+        # ... and a band around the cut boundary (the rim of a lenslet): there the
+        # surface has a kink, which an instrument's optical and pixel transfer
+        # function rounds over about its resolution (not described by the
+        # smoothing nuisance below)
+        near_edge = np.zeros(cut.shape, dtype=bool)
+        for ddx, ddy in ((EDGE_BAND, 0.0), (-EDGE_BAND, 0.0), (0.0, EDGE_BAND),
+                         (0.0, -EDGE_BAND)):
+            kd = surface_heights(case, PointSet(case, x + ddx, y + ddy), p0, traj,
+                                 return_pass=True)[1]
+            near_edge |= (kd >= 0) != cut
+        keep = (~(np.abs(hmin) < EDGE_MARGIN) & ~(cut & ambiguous) & ~near_edge
+                & ~self._near_border(x, y))
         # the uncut top only carries instrument noise, piston and tilt: thin it
         unc = np.nonzero(keep & ~cut)[0]
         if unc.size > MAX_UNCUT:
@@ -738,6 +783,37 @@ class PointsBlock(Block):
         self.n = int(self.dof)
 
     # ------------------------------------------------------------ build
+    def _near_border(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Points within :data:`EDGE_BAND` of the border of the valid data.
+
+        An instrument's smoothing is one-sided there (the map's edge, a void or
+        a dropout): its transfer function differs from the interior's.
+        """
+        if self.grid is None:
+            d = np.hypot(np.diff(x), np.diff(y))
+            step = float(np.median(d)) if d.size else 1.0
+            m = int(math.ceil(EDGE_BAND / max(step, 1e-12)))
+            out = np.zeros(x.size, dtype=bool)
+            out[:m] = out[-m:] = True
+            if x.size > 1:  # gaps in a profile
+                gap = np.nonzero(d > 1.5 * step)[0]
+                for g in gap:
+                    out[max(g - m + 1, 0) : g + m + 1] = True
+            return out
+        import scipy.ndimage as ndi
+
+        shape, flat = self.grid
+        valid = np.zeros(shape[0] * shape[1], dtype=bool)
+        valid[flat] = True
+        valid = valid.reshape(shape)
+        dx = float(np.min(np.abs(np.diff(np.unique(x))))) if np.unique(x).size > 1 \
+            else EDGE_BAND
+        m = int(math.ceil(EDGE_BAND / max(dx, 1e-12)))
+        inner = ndi.binary_erosion(np.pad(valid, m, constant_values=False),
+                                   structure=np.ones((2 * m + 1, 2 * m + 1)))
+        inner = inner[m:-m, m:-m] if m else inner
+        return ~inner.ravel()[flat]
+
     def _nuisance(self, p0: ModelParams) -> np.ndarray:
         x, y = self.pts.x, self.pts.y
         cols = [np.ones_like(x)]
@@ -761,6 +837,26 @@ class PointsBlock(Block):
                 self.ctx.case, PointSet(self.ctx.case, x - dx, y - dy), p0, traj
             )
             cols.append((hp - hm) / (2 * d) * 1e-6)
+        # the instrument's smoothing (optical PSF, pixel integration, resampling):
+        # to first order any symmetric kernel of variance s^2 adds (s^2 / 2) times
+        # the Laplacian of the heights, profiled out like piston and tilt
+        h0 = surface_heights(self.ctx.case, self.pts, p0, traj)
+        dl = self._pitch
+        lap = -2.0 * h0 if self.kind == "profile" else -4.0 * h0
+        offsets = ((dl, 0.0), (-dl, 0.0), (0.0, dl), (0.0, -dl))
+        if self.kind == "profile":
+            s = self.along[self.keep] if self.along is not None else None
+            ux, uy = (1.0, 0.0)
+            if s is not None and x.size > 1:
+                dxy = np.array([x[-1] - x[0], y[-1] - y[0]])
+                nrm = float(np.hypot(*dxy))
+                if nrm > 0:
+                    ux, uy = dxy / nrm
+            offsets = ((dl * ux, dl * uy), (-dl * ux, -dl * uy))
+        for ddx, ddy in offsets:
+            lap = lap + surface_heights(
+                self.ctx.case, PointSet(self.ctx.case, x + ddx, y + ddy), p0, traj)
+        cols.append(lap / dl**2 * 1e-12)
         return np.column_stack(cols)
 
     def _build_weights(self, p0: ModelParams, h0: np.ndarray) -> None:
@@ -778,31 +874,74 @@ class PointsBlock(Block):
         else:
             d = np.hypot(np.diff(self.x_all), np.diff(self.y_all))
             self._pitch = float(np.median(d)) if d.size else 1e-6
-        # time bins of cut points: points cut within one pixel's travel share noise
-        v = self.ctx.case.toolpath.path.angular_speed * float(np.median(self.pts.r))
-        dt_bin = max(self._pitch / v, 1.0 / fs)
+        # The tool height at a cut point is the controller-rate tool error
+        # interpolated linearly between the two samples around its pass time (the
+        # sweep interpolates the sampled path): z_i = (1 - a_i) n_k + a_i n_(k+1).
+        # Points are grouped by their interval k; in each group the residual is
+        # split exactly into its projection on the columns (1 - a, a), which
+        # carries the tool noise (at most two statistics per interval, whose
+        # covariance follows from the tool error's autocovariance at integer
+        # lags), and the orthogonal rest, which carries only instrument noise.
+        cut = self.cut
         bins = np.full(n, -1, dtype=np.int64)
-        if self.cut.any():
-            key = np.floor(self.tpass[self.cut] / dt_bin).astype(np.int64)
-            _, inv = np.unique(key, return_inverse=True)
-            bins[self.cut] = inv
+        a = np.zeros(n)
+        ks = np.zeros(0, dtype=np.int64)
+        if cut.any():
+            x = self.tpass[cut] * fs
+            k = np.floor(x)
+            a[cut] = x - k
+            ks, inv = np.unique(k.astype(np.int64), return_inverse=True)
+            bins[cut] = inv
         self.bins = bins
-        nb = int(bins.max()) + 1 if self.cut.any() else 0
+        self.a = a
+        self.bin_sample = ks
+        nb = int(ks.size)
         self.nb = nb
-        counts = np.bincount(bins[bins >= 0], minlength=nb).astype(float)
+        bc = bins[cut]
+        ac = a[cut]
+        counts = np.bincount(bc, minlength=nb).astype(float)
         self.counts = counts
-        tb = np.zeros(nb)
+        self.tb = (
+            np.bincount(bc, weights=self.tpass[cut], minlength=nb)
+            / np.maximum(counts, 1)
+            if nb
+            else np.zeros(0)
+        )
+        s11 = np.bincount(bc, weights=(1 - ac) ** 2, minlength=nb)
+        s12 = np.bincount(bc, weights=(1 - ac) * ac, minlength=nb)
+        s22 = np.bincount(bc, weights=ac**2, minlength=nb)
+        l11 = np.sqrt(s11)
+        l21 = np.where(l11 > 0, s12 / np.maximum(l11, 1e-300), 0.0)
+        l22sq = s22 - l21**2
+        rank2 = (counts >= 2) & (l22sq > 1e-8 * np.maximum(s22, 1e-300))
+        l22 = np.where(rank2, np.sqrt(np.maximum(l22sq, 0.0)), 0.0)
+        self._gram = (s11, s12, s22, l11, l21, l22, rank2)
+        # statistics: one per interval (a projection on 1 - a), a second where
+        # the interval's points span two directions
+        self.stat_bin = np.concatenate([np.arange(nb), np.nonzero(rank2)[0]])
+        self.stat_comp = np.concatenate(
+            [np.zeros(nb, dtype=np.int64), np.ones(int(rank2.sum()), dtype=np.int64)]
+        )
+        n_stats = int(self.stat_bin.size)
+        self.n_within = int(cut.sum()) - n_stats
+        # leverage of each cut point in its interval (for the sigma estimate)
+        det = s11 * s22 - s12**2
+        lev = np.zeros(n)
         if nb:
-            tb = np.bincount(
-                bins[bins >= 0], weights=self.tpass[self.cut], minlength=nb
-            ) / np.maximum(counts, 1)
-        self.tb = tb
-        # instrument noise from the nominal residual: within-bin spread and uncut.
-        # A clipped standard deviation (points beyond 5 robust sigma left out), not
-        # the MAD: the omnibus RMS tests of _locate compare variances at ~1e4 dof,
-        # where the MAD's 37 % efficiency alone spread the along-cut statistic
-        # ~1.3x wider than chi2 (measured on null cases). The estimate's own
-        # uncertainty enters those tests through ``sigma_dof`` and the overlaps.
+            x1, x2 = 1 - ac, ac
+            r2 = rank2[bc]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                h2 = (x1**2 * s22[bc] - 2 * x1 * x2 * s12[bc] + x2**2 * s11[bc]) / (
+                    det[bc])
+                h1 = x1**2 / s11[bc]
+            lev[cut] = np.where(r2, h2, h1)
+        self._lev = lev
+        # instrument noise from the nominal residual: within-interval spread and
+        # uncut. A clipped standard deviation (points beyond 5 robust sigma left
+        # out), not the MAD: the omnibus RMS tests of _locate compare variances at
+        # ~1e4 dof, where the MAD's 37 % efficiency alone spread the along-cut
+        # statistic ~1.3x wider than chi2 (measured on null cases). The estimate's
+        # own uncertainty enters those tests through ``sigma_dof`` and overlaps.
         X = self._nuisance(p0)
         self.X_raw = X
         r0 = self.z - self._predict(p0)
@@ -811,26 +950,63 @@ class PointsBlock(Block):
         dev = []
         n_within = 0
         if nb:
-            mb = np.bincount(
-                bins[self.cut], weights=r0[self.cut], minlength=nb
-            ) / np.maximum(counts, 1)
-            multi = counts[bins[self.cut]] > 1
-            within = (r0[self.cut] - mb[bins[self.cut]])[multi]
-            scale = np.sqrt(
-                counts[bins[self.cut]] / np.maximum(counts[bins[self.cut]] - 1, 1)
-            )
-            dev.append(within * scale[multi])
-            n_within = int(np.sum(counts[counts > 1] - 1))
+            w0 = self._within(r0[:, None])[:, 0]
+            ok = lev[cut] < 1 - 1e-9
+            dev.append(w0[ok] / np.sqrt(1 - lev[cut][ok]))
+            n_within = self.n_within
         n_uncut = 0
-        if (~self.cut).sum() > 8:
-            u = r0[~self.cut]
+        if (~cut).sum() > 8:
+            u = r0[~cut]
             dev.append(u - np.median(u))
             n_uncut = u.size
         allv = np.concatenate(dev) if dev else np.zeros(0)
+        # tool-noise covariance of the interval statistics per segment of
+        # connected time (sigma^2 is added once estimated)
+        tool_cov = []
+        if nb:
+            rt = tool_autocov_table(self.ctx, p0)
+            b_of = self.stat_bin
+            g0 = np.where(self.stat_comp == 0, l11[b_of], 0.0)
+            g1 = np.where(self.stat_comp == 0, l21[b_of], l22[b_of])
+            kk = ks[b_of]
+            order = np.argsort(kk, kind="stable")
+            gap = max(int(SEGMENT_GAP * fs), 1)
+            cuts = np.nonzero(np.diff(kk[order]) > gap)[0] + 1
+
+            def cov_at(d):
+                d = np.abs(d)
+                return np.where(d < rt.size, rt[np.minimum(d, rt.size - 1)], 0.0)
+
+            for seg in np.split(order, cuts):
+                d = kk[seg][:, None] - kk[seg][None, :]
+                c = (
+                    np.outer(g0[seg], g0[seg]) * cov_at(d)
+                    + np.outer(g0[seg], g1[seg]) * cov_at(d - 1)
+                    + np.outer(g1[seg], g0[seg]) * cov_at(d + 1)
+                    + np.outer(g1[seg], g1[seg]) * cov_at(d)
+                )
+                tool_cov.append((seg, c))
+        n_stats_dof = 0.0
+        self.ml_rho2 = 0.0
         sig, dof_sig = None, math.inf
-        if allv.size >= 16:
+        self.tool_scale = 1.0
+        self.stats_sigma = None
+        if allv.size >= 16 and allv.size >= min(MIN_SIGMA_POINTS, 0.5 * n_stats):
             sig, kept = _clipped_sd(allv)
             dof_sig = (n_within + n_uncut) * kept
+            if tool_cov:
+                # the tool-noise level is a nuisance within TOOL_SCALE_BOUNDS: the
+                # disturbance PSDs are calibrations, and an instrument's resampling
+                # between rows smooths the tool error along the cut
+                self.stats_sigma, self.tool_scale, _ = self._noise_ml(
+                    r0, tool_cov, allv, sigma=max(sig, MAP_FLOOR))
+        elif tool_cov:
+            # too few instrument-only values (a facing map: one or two points per
+            # interval, no uncut top): maximum likelihood of the statistics
+            # together with what there is, sigma and tool-noise scale jointly
+            sig, self.tool_scale, n_stats_dof = self._noise_ml(r0, tool_cov, allv)
+            self.stats_sigma = sig
+            dof_sig = n_stats_dof + n_within + n_uncut
         if sig is None or not np.isfinite(sig) or not sig > 0:
             d = np.diff(r0)
             sig, kept = _clipped_sd(d - np.median(d))
@@ -840,28 +1016,28 @@ class PointsBlock(Block):
             n_within = n_uncut = 0
         if not sig > MAP_FLOOR:
             dof_sig = math.inf  # the floor, not an estimate
+            n_stats_dof = 0.0
         self.sigma = max(float(sig), MAP_FLOOR)
         #: dof of the instrument-variance estimate, and how many of them came
-        #: from the within-bin spread and from the uncut top
+        #: from the within-interval spread, the uncut top and the statistics
         self.sigma_dof = float(dof_sig)
-        self.sigma_parts = {"within": n_within, "uncut": n_uncut}
-        # bin-mean covariance: tool vibration + instrument / count, per segment;
-        # whitening by the block-diagonal inverse Cholesky factor (sparse)
+        self.sigma_parts = {"within": n_within, "uncut": n_uncut,
+                            "stats": int(round(n_stats_dof))}
+        # whitening of the statistics by the block-diagonal inverse Cholesky
+        # factor of their covariance (sparse)
         self.segments = []
         self.wbins = None
         self.instrument_share = 0.0
-        if nb:
-            order = np.argsort(tb)
-            gaps = np.nonzero(np.diff(tb[order]) > 0.5e-3)[0] + 1
-            for seg in np.split(order, gaps):
-                lags = tb[seg][:, None] - tb[seg][None, :]
-                c = tool_autocov(self.ctx, p0, lags)
-                c = c + np.diag(self.sigma**2 / counts[seg])
+        if tool_cov:
+            s_st = max(self.stats_sigma or self.sigma, self.sigma)
+            for seg, c in tool_cov:
+                c = self.tool_scale * c
+                c[np.diag_indices_from(c)] += s_st**2
                 try:
                     ch = np.linalg.cholesky(c)
                 except np.linalg.LinAlgError:
                     ch = np.linalg.cholesky(
-                        c + np.eye(seg.size) * 1e-6 * np.trace(c) / seg.size
+                        c + np.eye(seg.size) * 1e-9 * np.trace(c) / seg.size
                     )
                 self.segments.append((seg, ch))
             inv = [
@@ -870,22 +1046,124 @@ class PointsBlock(Block):
             ]
             self.seg_index = np.concatenate([seg for seg, _ in self.segments])
             self.wbins = sp.sparse.block_diag(inv, format="csr")
-            # share of the whitened bin-mean power that scales with the instrument
-            # variance: d(sum v^2)/d(log sigma^2) = -tr(C^-1 D) on average,
-            # D = sigma^2 / counts (what an error in sigma moves in that test)
-            cinv_diag = np.asarray(self.wbins.multiply(self.wbins).sum(axis=0))
+            # share of the whitened statistics' power that scales with the
+            # instrument variance: sigma^2 tr(C^-1) / m on average (what an
+            # error in sigma moves in the along-cut test)
             self.instrument_share = float(
-                np.sum(cinv_diag.ravel() * self.sigma**2 / counts[self.seg_index])
-                / nb
+                s_st**2 * self.wbins.multiply(self.wbins).sum() / n_stats
             )
         wx = self._whiten(X)
         q, _ = np.linalg.qr(wx)
         self.q = q
         self.dof = n - q.shape[1]
 
+    def _noise_ml(self, r0, tool_cov, allv, sigma=None):
+        """Tool-noise scale (and, when ``sigma`` is None, the instrument sigma) by
+        maximum likelihood of the interval statistics.
+
+        ``nll = sum_seg [log det(k T + s^2 I) + b^T (k T + s^2 I)^-1 b]
+        + sum(v^2) / s^2 + n log s^2`` over at most :data:`ML_SEGMENTS` segments
+        (eigendecomposition of each tool covariance T once), ``v`` the
+        instrument-only values, ``k`` in :data:`TOOL_SCALE_BOUNDS`.
+
+        Returns
+        -------
+        sigma : float
+            White level of the statistics in m (at least ``sigma`` when given).
+        scale : float
+            Tool-noise power scale ``k`` (dimensionless).
+        stats_dof : float
+            Equivalent dof the statistics carry about ``log s^2``.
+        """
+        st = self._stats(r0[:, None])[:, 0]
+        parts = []
+        step = max(1, len(tool_cov) // ML_SEGMENTS)
+        for seg, c in tool_cov[::step][:ML_SEGMENTS]:
+            lam, v = np.linalg.eigh(c)
+            parts.append((np.maximum(lam, 0.0), (v.T @ st[seg]) ** 2))
+        lam = np.concatenate([p_[0] for p_ in parts])
+        proj = np.concatenate([p_[1] for p_ in parts])
+        ssv = float(allv @ allv) if allv.size else 0.0
+        nv = float(allv.size)
+        wseg = len(tool_cov) / max(len(parts), 1)
+        lo_k, hi_k = (math.log(b_) for b_ in TOOL_SCALE_BOUNDS)
+
+        def nll(lk, ls2):
+            s2, k = math.exp(ls2), math.exp(lk)
+            d = k * lam + s2
+            out = float(wseg * np.sum(np.log(d) + proj / d))
+            if sigma is None:
+                out += ssv / s2 + nv * ls2
+            return out
+
+        if sigma is not None:
+            # the statistics' own white level: at least the instrument sigma of
+            # the within-interval spread (more where the instrument resampled
+            # between rows, which the interval model leaves out)
+            lo_s = 2.0 * math.log(sigma)
+            bnd_s = (lo_s, lo_s + math.log(4.0))
+            res = sp.optimize.minimize(
+                lambda z: nll(z[0], z[1]), x0=[0.0, lo_s + 0.01],
+                bounds=[(lo_k, hi_k), bnd_s], method="L-BFGS-B")
+        else:
+            guess = float(np.median(proj) if proj.size else 1e-20)
+            bnd_s = (math.log(MAP_FLOOR**2 * 1e-2), math.log(max(guess, 1e-18) * 1e2))
+            res = sp.optimize.minimize(
+                lambda z: nll(z[0], z[1]), x0=[0.0, 0.5 * sum(bnd_s)],
+                bounds=[(lo_k, hi_k), bnd_s], method="L-BFGS-B")
+        lk, ls2 = (float(v) for v in res.x)
+        s2, k = math.exp(ls2), math.exp(lk)
+        w = s2 / (k * lam + s2)
+        stats_dof = float(wseg * np.sum(w**2))
+        # squared correlation of the along-cut sum of squares with the ML score
+        # (near 1: the estimate fixes that statistic, which then tells nothing);
+        # a scale at its bound leaves the statistic free
+        at_bound = min(abs(lk - lo_k), abs(lk - hi_k)) < 1e-3
+        self.ml_rho2 = 0.0 if at_bound else 1.0
+        return math.sqrt(s2), k, stats_dof
+
+    def _stats(self, rr: np.ndarray) -> np.ndarray:
+        """Interval statistics ``L^-1 X^T r`` of cut residuals (n_stats, m)."""
+        s11, s12, s22, l11, l21, l22, rank2 = self._gram
+        b = self.bins[self.cut]
+        ac = self.a[self.cut]
+        nb = self.nb
+        m = rr.shape[1]
+        t1 = np.zeros((nb, m))
+        t2 = np.zeros((nb, m))
+        for j in range(m):
+            rc = rr[self.cut, j]
+            t1[:, j] = np.bincount(b, weights=(1 - ac) * rc, minlength=nb)
+            t2[:, j] = np.bincount(b, weights=ac * rc, minlength=nb)
+        beta1 = t1 / l11[:, None]
+        beta2 = (t2[rank2] - l21[rank2, None] * beta1[rank2]) / l22[rank2, None]
+        return np.concatenate([beta1, beta2], axis=0)
+
+    def _within(self, rr: np.ndarray) -> np.ndarray:
+        """Cut residuals minus their projection on each interval's (1 - a, a)."""
+        s11, s12, s22, l11, l21, l22, rank2 = self._gram
+        b = self.bins[self.cut]
+        ac = self.a[self.cut]
+        nb = self.nb
+        out = np.empty((b.size, rr.shape[1]))
+        det = s11 * s22 - s12**2
+        for j in range(rr.shape[1]):
+            rc = rr[self.cut, j]
+            t1 = np.bincount(b, weights=(1 - ac) * rc, minlength=nb)
+            t2 = np.bincount(b, weights=ac * rc, minlength=nb)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                th1 = np.where(rank2, (s22 * t1 - s12 * t2) / det, t1 / s11)
+                th2 = np.where(rank2, (s11 * t2 - s12 * t1) / det, 0.0)
+            out[:, j] = rc - ((1 - ac) * th1[b] + ac * th2[b])
+        return out
+
     # ------------------------------------------------------------ evaluation
     def _whiten(self, r: np.ndarray) -> np.ndarray:
-        """Whiten point residuals (n,) or columns (n, m)."""
+        """Whiten point residuals (n,) or columns (n, m).
+
+        Layout: the uncut points, then the cut points' within-interval parts
+        (instrument noise only), then the whitened interval statistics.
+        """
         two = r.ndim == 2
         rr = r if two else r[:, None]
         parts = []
@@ -893,15 +1171,9 @@ class PointsBlock(Block):
         if (~cut).any():
             parts.append(rr[~cut] / self.sigma)
         if self.nb:
-            b = self.bins[cut]
-            cnt = self.counts
-            mb = np.zeros((self.nb, rr.shape[1]))
-            for j in range(rr.shape[1]):
-                mb[:, j] = np.bincount(b, weights=rr[cut, j], minlength=self.nb)
-            mb /= np.maximum(cnt, 1)[:, None]
-            within = (rr[cut] - mb[b]) / self.sigma
-            parts.append(within)
-            parts.append(np.asarray(self.wbins @ mb[self.seg_index]))
+            parts.append(self._within(rr) / self.sigma)
+            st = self._stats(rr)
+            parts.append(np.asarray(self.wbins @ st[self.seg_index]))
         out = np.concatenate(parts, axis=0)
         return out if two else out[:, 0]
 

@@ -274,17 +274,14 @@ def _locations(
     strokes = []
     currents = []
     rec_len = 4096
-    # the current limit acts on the demand applied after the fractional loop delay,
-    # (1 - frac) u[k] + frac u[k - 1] (the simulator's u_app)
-    frac = case.discrete(ModelParams())[4]
+    # the current limit acts on the DAC command itself (ServoLoop's amplifier)
     for b in blocks:
         if isinstance(b, TimeBlock):
             for i, rec in enumerate(b.records):
                 if "command" in rec:
                     strokes.append(float(np.max(np.abs(rec["command"]))))
                 u = b.predict(ModelParams(), i)["u"]
-                ua = (1.0 - frac) * u[1:] + frac * u[:-1]
-                currents.append(np.abs(ua) * m.actuator.current_gain)
+                currents.append(np.abs(u) * m.actuator.current_gain)
         if isinstance(b, SpectralBlock):
             # in controller samples: fs / record_length is the idle bin width
             rec_len = b.nsamp * case.fs / b.fs

@@ -541,7 +541,11 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
     for label, v, share, overlap in parts:
         if v.size == 0:
             continue
-        dof = v.size if "across" not in label else max(n_cut - b.nb, 1)
+        if label.startswith("along") and b.ml_rho2 > 0.5:
+            # the instrument sigma was fitted to these statistics themselves
+            # (maximum likelihood): their sum of squares is fixed by it
+            continue
+        dof = v.size if "across" not in label else max(b.n_within, 1)
         lp = variance_excess_logsf(
             float(v @ v), dof, share=share, sigma_dof=b.sigma_dof, overlap=overlap
         )

@@ -33,9 +33,15 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy as sp
 
-from ..servo import PIDF, Machine, ServoLoop, plant_from_machine, set_param
+from ..servo import (
+    PIDF,
+    LoopPerturbation,
+    Machine,
+    Nonlinearity,
+    ServoLoop,
+    StructuralMode,
+)
 
 __all__ = ["ModelParams", "CaseModel", "NOMINAL"]
 
@@ -198,9 +204,8 @@ class ModelParams:
 
 NOMINAL = ModelParams()
 
-
-def _double_pole(s: np.ndarray, w: float) -> np.ndarray:
-    return w**2 / (s + w) ** 2
+#: Output names of :meth:`ServoLoop.frf` as the diagnosis calls them.
+_OUT = {"following_error": "fe"}
 
 
 class CaseModel:
@@ -234,37 +239,38 @@ class CaseModel:
         self._cache: dict = {}
 
     # ------------------------------------------------------------ machine
-    def machine_for(self, p: ModelParams) -> Machine:
-        """Machine with the recalibration and delay knobs of ``p`` applied."""
-        m = self.machine
-        if p.moving_mass is not None:
-            m = m.with_moving_mass(p.moving_mass)
-            # keep the controller as installed (with_moving_mass keeps gains unset)
-        if p.flexure_stiffness is not None:
-            m = set_param(m, "mechanics.k2", float(p.flexure_stiffness))
-        if p.flexure_damping is not None:
-            m = set_param(m, "mechanics.c2", float(p.flexure_damping))
-        if p.force_constant is not None:
-            m = set_param(m, "actuator.force_constant", float(p.force_constant))
-        if p.sensor_bandwidth is not None:
-            m = set_param(m, "sensor.bandwidth", float(p.sensor_bandwidth))
-        if p.extra_delay != 0.0:
-            d = m.controller.delay + p.extra_delay * self.fs
-            m = set_param(m, "controller.delay", float(max(d, 0.0)))
-        return m
+    def perturbation(self, p: ModelParams) -> LoopPerturbation:
+        """The linear plant change of ``p`` (delay, mode, recalibration)."""
+        modes = ()
+        if p.has_mode:
+            modes = (StructuralMode(p.mode_frequency, p.mode_damping, p.mode_gain),)
+        return LoopPerturbation(
+            extra_delay=p.extra_delay,
+            modes=modes,
+            moving_mass=p.moving_mass,
+            flexure_stiffness=p.flexure_stiffness,
+            flexure_damping=p.flexure_damping,
+            force_constant=p.force_constant,
+            sensor_bandwidth=p.sensor_bandwidth,
+        )
+
+    def nonlinearity(self, p: ModelParams) -> Nonlinearity:
+        """The loop nonlinearities of ``p`` (saturation, Kf(x), flexure)."""
+        return Nonlinearity(
+            max_current=p.max_current,
+            kf_b1=p.kf_b1,
+            kf_b2=p.kf_b2,
+            flexure_k2=p.flexure_k2,
+            flexure_k3=p.flexure_k3,
+        )
 
     def loop_for(self, p: ModelParams) -> ServoLoop:
-        """ServoLoop of the plant under ``p`` with the nominal controller."""
-        key = ("loop",) + p.linear_key()
-        if key not in self._cache:
-            self._trim()
-            self._cache[key] = ServoLoop(self.machine_for(p), pidf=self.pidf)
-        return self._cache[key]
+        """The simulator's loop under ``p`` with the installed (nominal) controller."""
+        return self.loop.perturbed(self.perturbation(p))
 
-    def _trim(self) -> None:
-        if len(self._cache) > 256:
-            for k in list(self._cache)[:128]:
-                del self._cache[k]
+    def machine_for(self, p: ModelParams) -> Machine:
+        """Machine with the recalibration and delay knobs of ``p`` applied."""
+        return self.loop_for(p).machine
 
     def tool_radius(self) -> float:
         """Nose radius of the case's tool in m (0.5 mm without a toolpath)."""
@@ -278,52 +284,28 @@ class CaseModel:
     def paths(self, p: ModelParams, freq: np.ndarray) -> dict:
         """Closed-loop and open-loop responses at ``freq`` (Hz) under ``p``.
 
+        The simulator's own FRFs (:meth:`ServoLoop.frf` and
+        :meth:`ServoLoop.open_loop` under :meth:`perturbation`), renamed for the
+        diagnosis.
+
         Returns
         -------
         dict
             ``"open_loop"``: DAC V -> sensor V (ZOH and delay included);
+            ``"loop"``: the open-loop gain L;
             ``(input, output)`` for inputs ``reference``, ``sensor_noise``,
             ``current_noise`` (per A), ``base`` (per m), ``force`` (per N) and
             outputs ``fe`` (following error, m), ``tool`` (m), ``sensor`` (m).
         """
         freq = np.asarray(freq, dtype=float)
-        m = self.machine_for(p)
-        s = 2j * np.pi * freq
-        t = 1.0 / self.fs
-        amp = m.actuator.current_gain * _double_pole(s, m.actuator.corner)
-        sens = _double_pole(s, m.sensor.corner)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            zoh = np.where(np.abs(s) > 0, (1 - np.exp(-s * t)) / (s * t), 1.0)
-        delay = zoh * np.exp(-s * m.controller.delay * t)
-        pl = plant_from_machine(m).frf(freq)
-        sd = 1 if m.sensor.location == "carrier" else 0
-        bl = m.actuator.force_constant
-        hr = np.zeros_like(s)
-        if p.has_mode:
-            wr = 2 * np.pi * p.mode_frequency
-            hr = p.mode_gain * wr**2 / (s**2 + 2 * p.mode_damping * wr * s + wr**2)
-        pa1 = pl["actuator_force"][:, 0] + hr
-        pam = pl["actuator_force"][:, sd] + hr
-        gyu = amp * bl * pam * sens
-        gxu = amp * bl * pa1
-        k = self.pidf.frf(freq) * delay * m.sensor.sensitivity
-        loop = k * gyu
-        one = 1.0 + loop
-        out: dict = {"open_loop": delay * gyu * m.sensor.sensitivity, "loop": loop}
-        out[("reference", "fe")] = 1.0 / one
-        out[("reference", "sensor")] = gyu * k / one
-        out[("reference", "tool")] = gxu * k / one
-        out[("sensor_noise", "fe")] = -1.0 / one
-        out[("sensor_noise", "tool")] = -gxu * k / one
-        dist = {
-            "current_noise": (bl * pa1, bl * pam * sens),
-            "base": (pl["base"][:, 0], pl["base"][:, sd] * sens),
-            "force": (pl["tool_force"][:, 0], pl["tool_force"][:, sd] * sens),
+        pert = self.perturbation(p)
+        frf = self.loop.frf(freq, perturbation=pert)
+        out: dict = {
+            "open_loop": self.loop.open_loop(freq, perturbation=pert),
+            "loop": frf.loop,
         }
-        for name, (gx, gy) in dist.items():
-            out[(name, "fe")] = -gy / one
-            out[(name, "sensor")] = gy / one
-            out[(name, "tool")] = gx - gxu * k * gy / one
+        for (inp, outp), h in frf.paths.items():
+            out[(inp, _OUT.get(outp, outp))] = h
         return out
 
     def disturbance_psds(self, p: ModelParams, freq: np.ndarray) -> dict:
@@ -369,79 +351,22 @@ class CaseModel:
 
     # ------------------------------------------------------------ time domain
     def discrete(self, p: ModelParams):
-        """Discrete augmented model ``(ad, bd, cx, nd, frac)`` under ``p`` (cached)."""
-        key = ("disc",) + p.linear_key()
-        hit = self._cache.get(key)
-        if hit is not None:
-            return hit
-        loop = self.loop_for(p)
-        a, b, c = loop.analogue_ss()
-        m = loop.machine
-        n0 = a.shape[0]
-        nm = 2 if p.has_mode else 0
-        n = n0 + nm
-        A = np.zeros((n, n))
-        B = np.zeros((n, 3))
-        A[:n0, :n0] = a
-        B[:n0] = b
-        cx = np.zeros((5, n))
-        cx[0, :n0] = c[0]
-        cx[1, :n0] = c[1]
-        cx[2, 0] = 1.0  # coil current I (amplifier state)
-        cx[3, 3] = 1.0  # x2
-        cx[4, 4] = 1.0  # x3
-        if nm:
-            wr = 2 * np.pi * p.mode_frequency
-            bl = m.actuator.force_constant
-            ws = m.sensor.corner
-            A[n0, n0 + 1] = 1.0
-            A[n0 + 1, n0] = -(wr**2)
-            A[n0 + 1, n0 + 1] = -2 * p.mode_damping * wr
-            A[n0 + 1, 0] = wr**2 * p.mode_gain * bl
-            B[n0 + 1, 1] = wr**2 * p.mode_gain * bl
-            A[11, n0] += ws**2  # sensor filter sees q
-            cx[0, n0] = 1.0  # tool sees q
-        t = 1.0 / self.fs
-        big = np.zeros((n + 3, n + 3))
-        big[:n, :n] = A * t
-        big[:n, n:] = B * t
-        e = sp.linalg.expm(big)
-        ad, bd = e[:n, :n].copy(), e[:n, n:].copy()
-        d = m.controller.delay
-        nd = int(math.floor(d))
-        out = (
-            np.ascontiguousarray(ad),
-            np.ascontiguousarray(bd),
-            np.ascontiguousarray(cx),
-            nd,
-            float(d - nd),
-        )
-        self._trim()
-        self._cache[key] = out
-        return out
+        """Discrete model ``(ad, bd, cx, nd, frac)`` of the loop under ``p``."""
+        lp = self.loop_for(p)
+        ad, bd, cx = lp.discrete_models()[:3]
+        nd, frac = lp.delay_split()
+        return ad, bd, cx, nd, frac
 
     def controller(self):
-        """Tustin controller ``(ac, bc, cc, dc)`` of the fixed PIDF."""
-        key = ("ctrl",)
-        if key not in self._cache:
-            ac, bc, cc, dc = self.pidf.discrete_ss()
-            self._cache[key] = (
-                np.ascontiguousarray(ac),
-                np.ascontiguousarray(bc),
-                np.ascontiguousarray(cc.ravel()),
-                float(dc.ravel()[0]),
-            )
-        return self._cache[key]
+        """Tustin controller ``(ac, bc, cc, dc)`` of the installed PIDF."""
+        ac, bc, cc, dc = self.loop.discrete_models()[3:]
+        return ac, bc, np.ascontiguousarray(cc.ravel()), float(dc.ravel()[0])
 
     def kt(self, p: ModelParams) -> float:
         """Specific thrust pressure under ``p`` in N/m^2."""
         return (
             self.specific_force if p.specific_force is None else float(p.specific_force)
         )
-
-    def chip_args(self, p: ModelParams) -> tuple[float, float, float, float]:
-        """``(k_t, radius, top, area)`` of the lenslet chip force (plunge model)."""
-        return self.kt(p), self.tool_radius(), 0.0, -1.0
 
     def facing_force(self, p: ModelParams, t: np.ndarray) -> np.ndarray:
         """Steady facing thrust ``k_t A`` (N), ramped in over the first revolution.
@@ -504,89 +429,28 @@ class CaseModel:
             ``tool`` (m), ``sensor`` (m), ``fe`` (m), ``u`` (V), ``force`` (N),
             ``current`` (A). Non-finite values mean the loop diverged.
         """
-        from ._kernels import _nl_loop
+        from ..cutting import ChipModel
 
-        r = np.ascontiguousarray(reference, dtype=np.float64)
-        n = r.size
-        z = np.zeros(n)
-
-        def prep(a):
-            return z if a is None else np.ascontiguousarray(a, dtype=np.float64)
-
-        ad, bd, cx, nd, frac = self.discrete(p)
-        ac, bc, cc, dc = self.controller()
-        m = self.machine_for(p)
-        kt, radius, top, area = self.chip_args(p) if chip else (0.0, 1.0, 0.0, -1.0)
-        sat = math.isfinite(p.max_current)
-        umax = p.max_current / m.actuator.current_gain if sat else 0.0
-        out = np.zeros((6, n))
-        with np.errstate(all="ignore"):
-            _nl_loop(
-                ad,
-                bd,
-                cx,
-                ac,
-                bc,
-                cc,
-                dc,
-                m.sensor.sensitivity,
-                nd,
-                frac,
-                r,
-                prep(force),
-                prep(current_noise),
-                prep(sensor_noise),
-                kt,
-                radius,
-                top,
-                area,
-                umax,
-                p.kf_b1,
-                p.kf_b2,
-                p.flexure_k2,
-                p.flexure_k3,
-                m.actuator.force_constant,
-                1 if sat else 0,
-                out,
-            )
+        chip_model = ChipModel(self.kt(p), self.tool_radius(), 0.0) if chip else None
+        out = self.loop.simulate(
+            reference=reference,
+            force=force,
+            current_noise=current_noise,
+            sensor_noise=sensor_noise,
+            chip=chip_model,
+            perturbation=self.perturbation(p),
+            nonlinearity=self.nonlinearity(p),
+        )
         return {
-            "tool": out[0],
-            "sensor": out[1],
-            "fe": out[2],
-            "u": out[3],
-            "force": out[4],
-            "current": out[5],
+            "tool": out["tool"],
+            "sensor": out["sensor"],
+            "fe": out["following_error"],
+            "u": out["u"],
+            "force": out["force"],
+            "current": out["current"],
         }
 
     # ------------------------------------------------------------ stability
     def is_stable(self, p: ModelParams) -> bool:
         """True when the discrete closed loop under ``p`` is stable (linear part)."""
-        ad, bd, cx, nd, frac = self.discrete(p)
-        ac, bc, cc, dc = self.controller()
-        s = self.machine_for(p).sensor.sensitivity
-        nb = nd + 2
-        na, nc = ad.shape[0], ac.shape[0]
-        n = na + nc + nb
-        a = np.zeros((n, n))
-        e_row = -s * cx[1]
-        a[na : na + nc, :na] = np.outer(bc[:, 0], e_row)
-        a[na : na + nc, na : na + nc] = ac
-        u_row_a = dc * e_row
-        o = na + nc
-        a[o, :na] = u_row_a
-        a[o, na : na + nc] = cc
-        for j in range(1, nb):
-            a[o + j, o + j - 1] = 1.0
-
-        def add_applied(col: int, weight: float) -> None:
-            if col == 0:
-                a[:na, :na] += weight * np.outer(bd[:, 0], u_row_a)
-                a[:na, na : na + nc] += weight * np.outer(bd[:, 0], cc)
-            else:
-                a[:na, o + col - 1] += weight * bd[:, 0]
-
-        a[:na, :na] += ad
-        add_applied(nd, 1.0 - frac)
-        if frac > 0:
-            add_applied(nd + 1, frac)
-        return bool(np.max(np.abs(np.linalg.eigvals(a))) < 1.0 - 1e-9)
+        return self.loop.is_stable(perturbation=self.perturbation(p))

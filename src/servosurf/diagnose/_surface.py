@@ -243,9 +243,10 @@ def surface_heights(
     top : float, default: 0.0
         Pre-cut height in m.
     return_pass : bool, default: False
-        Also return the index of the active pass per point (-1 when uncut) and
+        Also return the index of the active pass per point (-1 when uncut),
         the lowest tool height before clipping at ``top`` (m, inf when no pass
-        reaches).
+        reaches) and the height of the runner-up pass above it (m, inf when
+        only one pass reaches).
 
     Returns
     -------
@@ -275,5 +276,11 @@ def surface_heights(
     if p.recovery:
         z = z + p.recovery * (top - z)
     if return_pass:
-        return z, np.where(cut, k, -1), hmin
+        # how far the runner-up pass is above the active one (inf: only one pass)
+        if h.shape[1] > 1:
+            second = np.partition(h, 1, axis=1)[:, 1]
+            gap = second - hmin
+        else:
+            gap = np.full(hmin.shape, np.inf)
+        return z, np.where(cut, k, -1), hmin, gap
     return z

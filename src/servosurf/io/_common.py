@@ -38,12 +38,21 @@ __all__ = [
     "timestamp_from_iso",
     "zip_member",
     "open_zip",
+    "zip_archive",
     "as_surface",
     "decode_text",
     "writer_error",
     "unsupported",
     "pixel_origin",
+    "SOFTWARE_NAME",
+    "software_label",
+    "software_version_numbers",
+    "written_by_servosurf",
 ]
+
+#: Name written in the software fields of every file servosurf writes, so that a
+#: simulated map is never taken for an instrument's measurement.
+SOFTWARE_NAME = "servosurf"
 
 #: Earliest plausible acquisition time (1980-01-01 UTC) in seconds since the epoch.
 #: Older time stamps are unset or garbage (Mx writes MATLAB day numbers there).
@@ -244,6 +253,28 @@ def make_surface(
 
 
 # ---------------------------------------------------------------- metadata
+def software_label() -> str:
+    """``"servosurf <version>"``: the software string servosurf writes."""
+    from .. import __version__
+
+    return f"{SOFTWARE_NAME} {__version__}"
+
+
+def software_version_numbers() -> tuple[int, int, int]:
+    """(major, minor, patch) of servosurf's version, for numeric header fields."""
+    from .. import __version__
+
+    parts = [int(p) if p.isdigit() else 0 for p in __version__.split(".")[:3]]
+    return tuple((parts + [0, 0, 0])[:3])  # type: ignore[return-value]
+
+
+def written_by_servosurf(software: str | None) -> bool:
+    """True when a software field names servosurf (a file servosurf wrote)."""
+    return isinstance(software, str) and software.strip().lower().startswith(
+        SOFTWARE_NAME
+    )
+
+
 def jsonable(obj: Any) -> Any:
     """Return ``obj`` with numpy values, bytes and non-finite floats made JSON-safe."""
     if isinstance(obj, dict):
@@ -375,6 +406,42 @@ def zip_member(
             f"archive member {member!r} cannot be read ({exc})",
             "an intact zip archive",
         ) from None
+
+
+#: Time stamp of every member of a zip archive servosurf writes (the DOS epoch,
+#: 1980-01-01 00:00:00): a fixed value, so identical content gives identical bytes.
+ZIP_DATE_TIME: tuple[int, int, int, int, int, int] = (1980, 1, 1, 0, 0, 0)
+
+
+def zip_archive(members: dict[str, bytes], *, compress: bool = True) -> bytes:
+    """Build a reproducible zip archive: same members, same bytes.
+
+    :mod:`zipfile` stamps members written by name with the current local time;
+    here every member gets :data:`ZIP_DATE_TIME`, Unix attributes ``0644`` and a
+    fixed creator system, in the order given.
+
+    Parameters
+    ----------
+    members : dict of str to bytes
+        Member names and contents, written in this order.
+    compress : bool, default: True
+        Deflate the members (zlib's default level); stored otherwise.
+
+    Returns
+    -------
+    bytes
+        The archive.
+    """
+    out = BytesIO()
+    method = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
+    with zipfile.ZipFile(out, "w") as zf:
+        for member, content in members.items():
+            info = zipfile.ZipInfo(member, date_time=ZIP_DATE_TIME)
+            info.compress_type = method
+            info.create_system = 3  # Unix, whatever the platform writing
+            info.external_attr = 0o644 << 16
+            zf.writestr(info, content)
+    return out.getvalue()
 
 
 def open_zip(data: bytes, name: str, what: str) -> zipfile.ZipFile:

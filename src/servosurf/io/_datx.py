@@ -17,6 +17,8 @@ the file is handed to h5py.
 
 from __future__ import annotations
 
+import hashlib
+import math
 import os
 import struct
 import uuid
@@ -47,6 +49,8 @@ HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _DBL_MAX = float(np.finfo(np.float64).max)
 _META_KEY = "servosurf.metadata"
 _ORIGIN_KEY = "servosurf.origin"  # exact (x0, y0) in m
+#: Set on the dataset when its wavelength is the nominal placeholder.
+_NOMINAL_WL_KEY = "servosurf.nominal_wavelength"
 _ATTR_PREFIX = "Data Context.Data Attributes."  # Mx attribute-name prefix
 
 
@@ -334,7 +338,9 @@ def _interpret(ex: dict[str, Any], name: str) -> Surface:
     ):
         x0, y0 = origin
     md = _group_metadata(ex["group"])
-    if "wavelength" not in md:
+    if _f(attrs.get(_NOMINAL_WL_KEY)):
+        md.pop("wavelength", None)  # servosurf's placeholder, not a measurement
+    elif "wavelength" not in md:
         wl = _f(attrs.get("Wavelength"))
         if wl is not None and np.isfinite(wl) and wl > 0:
             md["wavelength"] = wl
@@ -391,6 +397,29 @@ def read_datx(source: Source) -> Surface:
 
 
 # ------------------------------------------------------------------ writer
+#: Wavelength written when the surface carries none, in m (the HeNe line of the
+#: MetroPro and XYZ writers). The heights are in NanoMeters, so it does not enter
+#: them; readers such as prysm require the attribute to exist.
+NOMINAL_WAVELENGTH = 632.8e-9
+
+#: Namespace of the content-derived GUIDs of written files (uuid5 of this name).
+_GUID_NAMESPACE = uuid.uuid5(uuid.NAMESPACE_URL, "https://servosurf/datx")
+
+
+def _guids(surface: Surface, meta: str) -> dict[str, str]:
+    """Mx-style ``{GUID}`` names derived from the content (same data, same GUIDs)."""
+    h = hashlib.sha256()
+    z = np.ascontiguousarray(surface.z, dtype="<f8")
+    h.update(repr((z.shape, surface.dx, surface.dy, surface.x0, surface.y0)).encode())
+    h.update(z.tobytes())
+    h.update(meta.encode())
+    digest = h.hexdigest()
+    return {
+        k: "{" + str(uuid.uuid5(_GUID_NAMESPACE, f"{digest}:{k}")).upper() + "}"
+        for k in ("m", "s", "a")
+    }
+
+
 @register_writer(
     "datx",
     description="ZYGO Mx-style data (.datx, HDF5), heights in NanoMeters",
@@ -401,9 +430,19 @@ def encode_datx(surface: Surface) -> bytes:
 
     Heights are stored as float64 in ``NanoMeters`` with ``No Data`` = the largest
     float64 for invalid pixels; pixel sizes go to the X/Y converters (0 when
-    uncalibrated); all metadata is stored as JSON in the attribute
-    ``servosurf.metadata`` of the attribute group, and the exact origin in
-    ``servosurf.origin`` of the dataset.
+    uncalibrated) and, as real Mx files carry it, to the lateral resolution
+    attributes of the attribute group (``Data Context.Lateral Resolution`` and
+    ``Data Context.Data Attributes.Resolution``, the x pixel size in m, where
+    prysm looks for the pixel size); all metadata is stored as JSON in the
+    attribute ``servosurf.metadata`` of the attribute group, and the exact origin
+    in ``servosurf.origin`` of the dataset. The software attributes name
+    servosurf, not a ZYGO instrument.
+
+    The bytes are reproducible: the ``{GUID}`` names are derived from the content
+    (uuid5 of a SHA-256 of heights, pixel sizes, origin and metadata) instead of
+    being random, and no object carries creation or modification times (datasets
+    are created with ``track_times=False``; groups in the default, earliest
+    HDF5 file format store none).
 
     Parameters
     ----------
@@ -414,13 +453,21 @@ def encode_datx(surface: Surface) -> bytes:
     -------
     bytes
         The HDF5 file content.
+
+    Notes
+    -----
+    The ``Wavelength`` attributes hold ``metadata["wavelength"]`` (m) when it is a
+    positive number, else :data:`NOMINAL_WAVELENGTH` (never NaN); the reader
+    reports a wavelength only when the metadata held one.
     """
     import h5py
 
-    guid = {k: "{" + str(uuid.uuid4()).upper() + "}" for k in ("m", "s", "a")}
     md = surface.metadata
+    meta = metadata_json(md, exclude=("source_format",))
+    guid = _guids(surface, meta)
     wl = md.get("wavelength")
-    wl = float(wl) if isinstance(wl, int | float) and wl > 0 else float("nan")
+    wl_known = isinstance(wl, int | float) and math.isfinite(wl) and wl > 0
+    wl = float(wl) if wl_known else NOMINAL_WAVELENGTH
     vstr = h5py.string_dtype("utf-8")
     astr = h5py.string_dtype("ascii")
     conv_dt = np.dtype(
@@ -430,10 +477,16 @@ def encode_datx(surface: Surface) -> bytes:
             ("Parameters", h5py.vlen_dtype(np.float64)),
         ]
     )
+    conv_value_dt = np.dtype([("Converter", conv_dt), ("Value", np.float64)])
 
     def conv(cat: str, unit: str, params: list[float]) -> np.ndarray:
         a = np.empty(1, dtype=conv_dt)
         a[0] = (cat.encode(), unit.encode(), np.asarray(params, dtype=np.float64))
+        return a
+
+    def conv_value(cat: str, unit: str, params: list[float], v: float) -> np.ndarray:
+        a = np.empty(1, dtype=conv_value_dt)
+        a[0] = (conv(cat, unit, params)[0], v)
         return a
 
     def s(text: str) -> np.ndarray:
@@ -445,9 +498,13 @@ def encode_datx(surface: Surface) -> bytes:
     ny, nx = surface.shape
     z = surface.z * 1e9
     z[~np.isfinite(z)] = _DBL_MAX
+    dxv = surface.dx or 0.0
+    dyv = surface.dy or 0.0
     bio = BytesIO()
     with h5py.File(bio, "w") as f:
-        attrs = f.create_group(f"Attributes/{guid['a']}").attrs
+        top = f.create_group("Attributes")
+        top.attrs["File Layout Version"] = np.array([1], dtype=np.int32)
+        attrs = top.create_group(guid["a"]).attrs
         for key, text in (
             ("Objective", md.get("objective")),
             ("Comment", md.get("comment")),
@@ -456,12 +513,21 @@ def encode_datx(surface: Surface) -> bytes:
                 attrs[_ATTR_PREFIX + key] = s(text)
         attrs[_ATTR_PREFIX + "Software Info Name"] = s("servosurf")
         attrs[_ATTR_PREFIX + "Software Info Version"] = s(__version__)
+        attrs[_ATTR_PREFIX + "Wavelength"] = conv_value(
+            "LinearCat", "Meters", [0.0], wl
+        )
         attrs[_ATTR_PREFIX + "Wavelength:Value"] = num(wl)
         attrs[_ATTR_PREFIX + "Wavelength:Unit"] = s("Meters")
-        attrs[_META_KEY] = s(metadata_json(md, exclude=("source_format",)))
-        ds = f.create_dataset(f"Data/Surface/{guid['s']}", data=z, dtype=np.float64)
-        dxv = surface.dx or 0.0
-        dyv = surface.dy or 0.0
+        # Lateral resolution as Mx writes it: in the data attributes
+        # ("Resolution") and in the data context ("Lateral Resolution").
+        for key in (_ATTR_PREFIX + "Resolution", "Data Context.Lateral Resolution"):
+            attrs[key] = conv_value("LinearCat", "Meters", [0.0], dxv)
+            attrs[key + ":Value"] = num(dxv)
+            attrs[key + ":Unit"] = s("Meters")
+        attrs[_META_KEY] = s(meta)
+        ds = f.create_group("Data/Surface").create_dataset(
+            guid["s"], data=z, dtype=np.float64, track_times=False
+        )
         ds.attrs["Unit"] = s("NanoMeters")
         ds.attrs["No Data"] = num(_DBL_MAX)
         ds.attrs["Wavelength"] = num(wl)
@@ -484,6 +550,8 @@ def encode_datx(surface: Surface) -> bytes:
         ds.attrs["Coordinates"] = coords
         ds.attrs["Group Number"] = np.array([1], dtype=np.int32)
         ds.attrs[_ORIGIN_KEY] = np.array([surface.x0, surface.y0], dtype=np.float64)
+        if not wl_known:
+            ds.attrs[_NOMINAL_WL_KEY] = np.array([1], dtype=np.uint8)
         rows = [
             ("Root", "Measurement", guid["m"]),
             (guid["m"], "Attributes", f"/Attributes/{guid['a']}"),
@@ -497,5 +565,5 @@ def encode_datx(surface: Surface) -> bytes:
         ]
         meta_dt = np.dtype([("Source", astr), ("Link", astr), ("Destination", astr)])
         table = np.array([tuple(c.encode() for c in r) for r in rows], dtype=meta_dt)
-        f.create_dataset("MetaData", data=table)
+        f.create_dataset("MetaData", data=table, track_times=False)
     return bio.getvalue()

@@ -54,6 +54,7 @@ DATASET_ATTRS = (
     "Obliquity Factor",
     "Coordinates",
     "servosurf.origin",
+    "servosurf.nominal_wavelength",
 )
 #: Attribute-group keys the reader uses, by name suffix.
 GROUP_ATTRS = (

@@ -32,8 +32,11 @@ from ._common import (
     metadata_json,
     parse_metadata_json,
     pixel_origin,
+    software_label,
+    software_version_numbers,
     timestamp_from_iso,
     writer_error,
+    written_by_servosurf,
 )
 from ._registry import register_reader, register_writer
 
@@ -108,7 +111,6 @@ _NATIVE_KEYS = (
     "numerical_aperture",
     "source_format",
     "metropro",
-    "instrument",
     "software",
     "comment",
     "zoom",
@@ -218,7 +220,12 @@ def parse_header(data: bytes, name: str) -> dict[str, Any]:
 
 
 def _metadata(h: dict[str, Any]) -> dict[str, Any]:
-    md: dict[str, Any] = {"instrument": "ZYGO"}
+    own = written_by_servosurf(h["swinfo_date"])
+    # A file servosurf wrote names servosurf in its software field (swinfo_date)
+    # and comes from no ZYGO instrument; any other .dat is ZYGO's.
+    md: dict[str, Any] = (
+        {"software": h["swinfo_date"]} if own else {"instrument": "ZYGO"}
+    )
     serial = h["sys_serial2"] if h["sys_serial2"] > 0 else h["sys_serial"]
     if serial:
         md["serial"] = str(serial)
@@ -236,7 +243,7 @@ def _metadata(h: dict[str, Any]) -> dict[str, Any]:
         md["date"] = date
     sw = _SOFTWARE.get(h["swinfo_type"])
     version = f"{h['swinfo_vers_maj']}.{h['swinfo_vers_min']}.{h['swinfo_vers_bug']}"
-    if sw:
+    if sw and not own:
         md["software"] = f"{sw} {version}"
     extra = parse_metadata_json(h["comment"])
     if extra is not None:
@@ -293,7 +300,8 @@ def read_metropro_dat(source: Source) -> Surface:
     Surface
         Heights in m (NaN for no-data), ``dx = dy = lateral_res`` in m or None when
         ``lateral_res`` is 0. ``x0, y0`` locate the phase window on the camera, in m
-        (0 when uncalibrated).
+        (0 when uncalibrated). ``metadata["instrument"]`` is ``"ZYGO"`` unless the
+        software field names servosurf (a file servosurf wrote).
     """
     h = parse_header(source.data, source.name)
     start = h["header_size"] + h["ac_n_bytes"]
@@ -352,7 +360,11 @@ def encode_metropro_dat(
     """Encode a surface as a MetroPro ``.dat`` file.
 
     Heights are quantised to ``intf_scale_factor * obliquity_factor * wavelength /
-    R`` (about 9.7 pm with the defaults), the resolution of the format.
+    R`` (about 9.7 pm with the defaults), the resolution of the format. The file
+    is labelled as servosurf's, not as a ZYGO instrument's: ``swinfo_type`` 0,
+    ``swinfo_date`` = ``"servosurf <version>"``, the version in ``swinfo_vers``,
+    no system type or serial number. The same surface gives the same bytes (the
+    time stamp comes from ``metadata["date"]``, 0 without one).
 
     Parameters
     ----------
@@ -485,6 +497,13 @@ def encode_metropro_dat(
     put(">I", 0, MAGIC[header_format])
     put(">H", 4, header_format)
     put(">I", 6, hsize)
+    # Software: swinfo_type 0 (not MetroPro, MetroBASIC or d2bug) and the software
+    # string "servosurf <version>" where MetroPro writes its build date; no
+    # instrument type or serial number (sys_type, sys_serial stay 0).
+    put(">h", 10, 0)
+    _put_text(hdr, 12, 30, software_label())
+    for off, v in zip((42, 44, 46), software_version_numbers(), strict=True):
+        put(">h", off, v)
     put(">H", 52, aw)
     put(">H", 54, ah)
     put(">H", 56, nb)

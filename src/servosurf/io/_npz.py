@@ -21,6 +21,7 @@ from ._common import (
     metadata_json,
     open_zip,
     parse_metadata_json,
+    zip_archive,
     zip_member,
 )
 from ._registry import register_reader, register_writer
@@ -158,6 +159,10 @@ def read_npz(source: Source) -> Surface:
 def encode_npz(surface: Surface, *, compressed: bool = True) -> bytes:
     """Encode a surface as a servosurf ``.npz`` archive (exact float64 round trip).
 
+    The members are ``.npy`` arrays as :func:`numpy.savez` writes them, in a zip
+    archive with fixed member time stamps, so the same surface gives the same
+    bytes (``numpy.load`` reads it).
+
     Parameters
     ----------
     surface : Surface
@@ -181,6 +186,10 @@ def encode_npz(surface: Surface, *, compressed: bool = True) -> bytes:
             metadata_json(surface.metadata, exclude=("source_format",))
         ),
     }
-    out = BytesIO()
-    (np.savez_compressed if compressed else np.savez)(out, **arrays)
-    return out.getvalue()
+    members = {}
+    for key, value in arrays.items():
+        buf = BytesIO()
+        np.lib.format.write_array(buf, np.asanyarray(value), allow_pickle=False)
+        members[f"{key}.npy"] = buf.getvalue()
+    # np.savez stamps every member with the current time; zip_archive does not.
+    return zip_archive(members, compress=compressed)

@@ -82,6 +82,7 @@ class _Writer:
     description: str
     suffixes: tuple[str, ...]
     encode: EncodeFn
+    profiles: bool
 
 
 _READERS: dict[str, _Reader] = {}
@@ -137,7 +138,11 @@ def register_reader(
 
 
 def register_writer(
-    name: str, *, description: str, suffixes: tuple[str, ...]
+    name: str,
+    *,
+    description: str,
+    suffixes: tuple[str, ...],
+    profiles: bool = False,
 ) -> Callable[[EncodeFn], EncodeFn]:
     """Register ``encode(surface, **options) -> bytes`` as a writer (decorator).
 
@@ -149,6 +154,10 @@ def register_writer(
         One-line description.
     suffixes : tuple of str
         Suffixes with the dot.
+    profiles : bool, default: False
+        The format stores profiles as profiles: ``encode`` receives a
+        :class:`Profile` unchanged. Otherwise a profile is passed as a one-row
+        :class:`Surface` with ``dy = dx``.
 
     Returns
     -------
@@ -158,7 +167,7 @@ def register_writer(
 
     def deco(fn: EncodeFn) -> EncodeFn:
         _WRITERS[name] = _Writer(
-            name, description, tuple(s.lower() for s in suffixes), fn
+            name, description, tuple(s.lower() for s in suffixes), fn, profiles
         )
         return fn
 
@@ -380,7 +389,7 @@ def read_profile(
         return Profile(obj.z.ravel(), step, metadata=dict(obj.metadata), x0=x0)
     raise UnsupportedFileFormatError(
         f"{_display(source)}: holds a {ny}x{nx} surface ({name}); expected a profile "
-        "(use read_surface)"
+        "(an Mx profile .csv or a one-row map); servosurf info describes maps"
     )
 
 
@@ -402,7 +411,9 @@ def write_surface(
     Parameters
     ----------
     surface : Surface or Profile
-        Heights in m; a profile is written as a one-row surface with ``dy = dx``.
+        Heights in m. A profile is written as a profile where the format has one
+        (``.x3p``: ``FeatureType PRF``), as a one-row surface with ``dy = dx``
+        elsewhere.
     path : str, path-like or binary file-like
         Destination. A path is written through a temporary file renamed at the end,
         so an error never leaves a half-written file.
@@ -420,7 +431,6 @@ def write_surface(
     FileFormatError
         The surface cannot be stored in that format (e.g. uncalibrated x3p).
     """
-    surf = as_surface(surface)
     if format is None:
         if not isinstance(path, str | os.PathLike):
             raise UnsupportedFileFormatError(
@@ -440,13 +450,13 @@ def write_surface(
         name = names[0]
     else:
         name = _resolve_name(format, _WRITERS, "writer")
-    data = _WRITERS[name].encode(surf, **options)
+    data = _encode(name, surface, options)
     if not isinstance(data, bytes):  # pragma: no cover - writer contract
         raise FileFormatError(
             f"writer {name} returned {type(data).__name__}, not bytes"
         )
     if isinstance(path, str | os.PathLike):
-        from ..commands._common import atomic_write
+        from .._atomic import atomic_write
 
         atomic_write(path, lambda p: p.write_bytes(data))
     else:
@@ -459,7 +469,8 @@ def encode_surface(surface: Surface | Profile, format: str, **options: Any) -> b
     Parameters
     ----------
     surface : Surface or Profile
-        Heights in m; a profile becomes a one-row surface with ``dy = dx``.
+        Heights in m; a profile stays a profile where the format has one, else
+        it becomes a one-row surface with ``dy = dx``.
     format : str
         Writable format name or suffix (``"datx"``, ``".x3p"``, ...).
     **options
@@ -478,4 +489,11 @@ def encode_surface(surface: Surface | Profile, format: str, **options: Any) -> b
         The surface cannot be stored in that format.
     """
     name = _resolve_name(format, _WRITERS, "writer")
-    return _WRITERS[name].encode(as_surface(surface), **options)
+    return _encode(name, surface, options)
+
+
+def _encode(name: str, surface: Surface | Profile, options: dict[str, Any]) -> bytes:
+    writer = _WRITERS[name]
+    if not (writer.profiles and isinstance(surface, Profile)):
+        surface = as_surface(surface)
+    return writer.encode(surface, **options)

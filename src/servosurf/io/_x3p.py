@@ -7,6 +7,10 @@ optional metadata (Record2) and the data (Record3): ``MatrixDimension`` and eith
 ``DataLink`` to a little-endian binary member (x fastest, then y) with an optional
 validity bit map (one bit per point, least significant bit first), or the values as
 text in ``DataList/Datum`` elements (an empty Datum is an invalid point).
+
+``FeatureType`` ``SUR`` is an areal map; ``PRF`` is a profile, an ``N x 1 x M``
+matrix (``N`` points along CX, ``M`` layers; one layer is read), returned as a
+:class:`~servosurf.metrology.Profile` and written from one.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..metrology._surface import Surface
+from ..metrology._surface import Profile, Surface
 from ._common import (
     Source,
     check_pixel_size,
@@ -33,6 +37,7 @@ from ._common import (
     timestamp_from_iso,
     unsupported,
     writer_error,
+    zip_archive,
     zip_member,
 )
 from ._registry import register_reader, register_writer
@@ -42,6 +47,7 @@ __all__ = ["read_x3p", "encode_x3p"]
 NS = "http://www.opengps.eu/2008/ISO5436_2"
 _DTYPES = {"I": "<i2", "L": "<i4", "F": "<f4", "D": "<f8"}
 _MAX_XML_BYTES = 256 * 2**20
+_NA = "not available"  # the schema's placeholder for a required, unknown value
 
 
 def _is_x3p(data: bytes) -> bool:
@@ -107,7 +113,7 @@ def _number(
     magic=(b"PK\x03\x04",),
     sniff=_is_x3p,
 )
-def read_x3p(source: Source) -> Surface:
+def read_x3p(source: Source) -> Surface | Profile:
     """Read an ``.x3p`` file.
 
     Parameters
@@ -117,10 +123,17 @@ def read_x3p(source: Source) -> Surface:
 
     Returns
     -------
-    Surface
-        Heights in m (NaN where the validity map or a NaN marks an invalid point),
-        ``dx``/``dy`` from the CX/CY increments in m, ``x0``/``y0`` from their
-        offsets.
+    Surface or Profile
+        ``FeatureType SUR``: a Surface, heights in m (NaN where the validity map or
+        a NaN marks an invalid point), ``dx``/``dy`` from the CX/CY increments in
+        m, ``x0``/``y0`` from their offsets. ``FeatureType PRF`` (an ``N x 1 x 1``
+        matrix): a Profile with step ``dx`` and start ``x0`` from CX, in m.
+
+    Notes
+    -----
+    The MD5 checksums of the archive are not verified (as Gwyddion and
+    SurfaceTopography, unlike the openGPS library and surfalize): a damaged
+    member is caught by the size checks and the zip CRC instead.
     """
     name = source.name
     zf = open_zip(source.data, name, "an .x3p zip archive")
@@ -150,7 +163,7 @@ def read_x3p(source: Source) -> Surface:
         return _read_tree(zf, root, name)
 
 
-def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface:
+def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface | Profile:
     r1 = _child(root, "Record1")
     r3 = _child(root, "Record3")
     if r1 is None or r3 is None:
@@ -182,8 +195,14 @@ def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface:
     )
     if nz != 1:
         raise unsupported(name, f"SizeZ is {nz} (several layers)", "SizeZ = 1")
-    if ny == 1 and dy_raw == 0.0:
-        dy = dx  # profiles may leave CY/Increment unset
+    if feature == "PRF" and ny != 1:
+        raise corrupt(
+            name,
+            f"FeatureType is PRF but SizeY is {ny}",
+            "SizeY = 1 (ISO 5436-2 profiles are N x 1 x M matrices)",
+        )
+    if ny == 1 and (dy_raw == 0.0 or feature == "PRF"):
+        dy = dx  # profiles may leave CY/Increment unset; it carries no data
     else:
         dy = check_pixel_size(
             dy_raw, name, "CY/Increment", zero_means_uncalibrated=False
@@ -228,7 +247,14 @@ def _read_tree(zf: zipfile.ZipFile, root: ET.Element, name: str) -> Surface:
     md = _metadata(root)
     md["source_format"] = "x3p"
     md["x3p"] = {"feature_type": feature, "z_data_type": ztype}
-    return make_surface(z, dx, dy, md, name, x0=x0, y0=y0)
+    surface = make_surface(z, dx, dy, md, name, x0=x0, y0=y0)
+    if feature != "PRF":
+        return surface
+    if nx < 2:
+        raise corrupt(name, f"profile has {nx} point", "at least 2 points")
+    md = dict(surface.metadata)
+    md["kind"] = "profile"
+    return Profile(surface.z[0], dx, metadata=md, x0=x0)
 
 
 def _data_list(r3: ET.Element, n: int, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -304,18 +330,29 @@ def _sub(parent: ET.Element, tag: str, text: str | None = None) -> ET.Element:
     "x3p",
     description="ISO 5436-2 / ISO 25178-72 (.x3p), float64 heights",
     suffixes=(".x3p",),
+    profiles=True,
 )
-def encode_x3p(surface: Surface) -> bytes:
-    """Encode a surface as an ``.x3p`` archive.
+def encode_x3p(surface: Surface | Profile) -> bytes:
+    """Encode a surface (``FeatureType SUR``) or a profile (``PRF``) as ``.x3p``.
 
     Heights are stored as float64 in m (exact), invalid pixels as NaN plus a
     validity bit map; metadata goes to Record2 (date, instrument) and, as JSON, to
-    ``Record2/Comment``.
+    ``Record2/Comment``. A :class:`Profile` is written as a profile, as ISO
+    5436-2 defines it: ``FeatureType PRF``, a matrix of ``N x 1 x 1`` points along
+    the incremental CX axis (the schema still requires a CY axis: it is written
+    incremental with the profile step, offset 0, and carries no data).
+
+    The archive is reproducible: the MD5 checksums (``md5checksum.hex`` and the
+    ``MD5Checksum*`` elements of ``main.xml``) are lower-case hexadecimal as the
+    openGPS reference files and instrument software write them (surfalize compares
+    them case-sensitively), and every zip member carries the fixed time stamp
+    :data:`~servosurf.io._common.ZIP_DATE_TIME`, so the same data give the same
+    bytes.
 
     Parameters
     ----------
-    surface : Surface
-        Heights in m with pixel sizes in m.
+    surface : Surface or Profile
+        Heights in m with pixel sizes (profile step) in m.
 
     Returns
     -------
@@ -327,15 +364,22 @@ def encode_x3p(surface: Surface) -> bytes:
     FileFormatError
         When the surface is uncalibrated (x3p needs increments in m).
     """
-    if not surface.calibrated:
-        raise writer_error(
-            "x3p",
-            "the surface is laterally uncalibrated (dx or dy is None)",
-            "x3p needs pixel sizes in m; set dx and dy first",
-        )
-    ny, nx = surface.shape
+    if isinstance(surface, Profile):
+        feature = "PRF"
+        z = np.ascontiguousarray(surface.z[None, :], dtype="<f8")
+        steps = ((surface.dx, surface.x0), (surface.dx, 0.0))
+    else:
+        if not surface.calibrated:
+            raise writer_error(
+                "x3p",
+                "the surface is laterally uncalibrated (no pixel size)",
+                "x3p needs pixel sizes in m; write it as .datx, .dat or .npz",
+            )
+        feature = "SUR"
+        z = np.ascontiguousarray(surface.z, dtype="<f8")
+        steps = ((surface.dx, surface.x0), (surface.dy, surface.y0))
+    ny, nx = z.shape
     md = surface.metadata
-    z = np.ascontiguousarray(surface.z, dtype="<f8")
     valid = np.isfinite(z)
     data = z.tobytes()
     xsi = "http://www.w3.org/2001/XMLSchema-instance"
@@ -349,12 +393,9 @@ def encode_x3p(surface: Surface) -> bytes:
     )
     r1 = _sub(root, "Record1")
     _sub(r1, "Revision", "ISO5436 - 2000")
-    _sub(r1, "FeatureType", "SUR")
+    _sub(r1, "FeatureType", feature)
     axes = _sub(r1, "Axes")
-    for ax, inc, off in (
-        ("CX", surface.dx, surface.x0),
-        ("CY", surface.dy, surface.y0),
-    ):
+    for ax, (inc, off) in zip(("CX", "CY"), steps, strict=True):
         e = _sub(axes, ax)
         _sub(e, "AxisType", "I")
         _sub(e, "DataType", "D")
@@ -367,15 +408,18 @@ def encode_x3p(surface: Surface) -> bytes:
     date = md.get("date") if isinstance(md.get("date"), str) else "1970-01-01T00:00:00"
     _sub(r2, "Date", date)
     inst = _sub(r2, "Instrument")
+    # The file is made by servosurf: Manufacturer and Version say so; the model
+    # and objective of a measured map (if any) are kept, "not available" else.
     _sub(inst, "Manufacturer", "servosurf")
-    _sub(inst, "Model", str(md.get("instrument", "servosurf")))
-    _sub(inst, "Serial", str(md.get("serial", "not available")))
-    _sub(inst, "Version", __version__)
+    _sub(inst, "Model", str(md.get("instrument", _NA)))
+    _sub(inst, "Serial", str(md.get("serial", _NA)))
+    _sub(inst, "Version", f"servosurf {__version__}")
     _sub(r2, "CalibrationDate", date)
     probe = _sub(r2, "ProbingSystem")
     _sub(probe, "Type", "Software")
-    _sub(probe, "Identification", str(md.get("objective", "servosurf")))
-    _sub(r2, "Comment", metadata_json(md, exclude=("source_format", "x3p")))
+    _sub(probe, "Identification", str(md.get("objective", _NA)))
+    skip = ("source_format", "x3p") + (("kind",) if feature == "PRF" else ())
+    _sub(r2, "Comment", metadata_json(md, exclude=skip))
     r3 = _sub(root, "Record3")
     dims = _sub(r3, "MatrixDimension")
     _sub(dims, "SizeX", str(nx))
@@ -383,12 +427,12 @@ def encode_x3p(surface: Surface) -> bytes:
     _sub(dims, "SizeZ", "1")
     link = _sub(r3, "DataLink")
     _sub(link, "PointDataLink", "bindata/data.bin")
-    _sub(link, "MD5ChecksumPointData", hashlib.md5(data).hexdigest().upper())
+    _sub(link, "MD5ChecksumPointData", hashlib.md5(data).hexdigest())
     members = {"bindata/data.bin": data}
     if not valid.all():
         bits = np.packbits(valid.ravel(), bitorder="little").tobytes()
         _sub(link, "ValidPointsLink", "bindata/valid.bin")
-        _sub(link, "MD5ChecksumValidPoints", hashlib.md5(bits).hexdigest().upper())
+        _sub(link, "MD5ChecksumValidPoints", hashlib.md5(bits).hexdigest())
         members["bindata/valid.bin"] = bits
     r4 = _sub(root, "Record4")
     _sub(r4, "ChecksumFile", "md5checksum.hex")
@@ -398,12 +442,7 @@ def encode_x3p(surface: Surface) -> bytes:
         + ET.tostring(root, encoding="utf-8", xml_declaration=False)
         + b"\n"
     )
-    out = BytesIO()
-    with zipfile.ZipFile(out, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-        zf.writestr("main.xml", xml)
-        zf.writestr(
-            "md5checksum.hex", f"{hashlib.md5(xml).hexdigest().upper()} *main.xml\n"
-        )
-        for member, content in members.items():
-            zf.writestr(member, content)
-    return out.getvalue()
+    checksum = f"{hashlib.md5(xml).hexdigest()} *main.xml\n".encode("ascii")
+    return zip_archive(
+        {"main.xml": xml, "md5checksum.hex": checksum, **members}, compress=True
+    )

@@ -46,6 +46,7 @@ from ._common import (
     iso_date,
     make_surface,
     parse_metadata_json,
+    written_by_servosurf,
 )
 from ._metropro_dat import NO_DATA, PHASE_RES
 from ._registry import register_reader
@@ -239,8 +240,14 @@ def parse_ascii_header(
 
 
 def header_metadata(h: dict[str, Any]) -> dict[str, Any]:
-    """Return the common metadata of a parsed text header."""
-    md: dict[str, Any] = {"instrument": "ZYGO"}
+    """Return the common metadata of a parsed text header.
+
+    ``instrument`` is ``"ZYGO"`` unless the software date field names servosurf
+    (a file servosurf wrote), whose ``software`` is that field.
+    """
+    sw_date = h.get("swinfo_date")
+    own = written_by_servosurf(sw_date)
+    md: dict[str, Any] = {"software": sw_date} if own else {"instrument": "ZYGO"}
     if h.get("obj_name"):
         md["objective"] = h["obj_name"]
     if h.get("zoom_descr"):
@@ -251,7 +258,7 @@ def header_metadata(h: dict[str, Any]) -> dict[str, Any]:
     date = iso_date(h.get("time_stamp", 0))
     if date:
         md["date"] = date
-    if h.get("swinfo_type") == 1:
+    if h.get("swinfo_type") == 1 and not own:
         md["software"] = (
             f"MetroPro {h.get('swinfo_vers_maj', 0)}.{h.get('swinfo_vers_min', 0)}."
             f"{h.get('swinfo_vers_bug', 0)}"

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import __version__
 from ..metrology._surface import Surface
 from ._common import (
     Source,
@@ -19,6 +18,8 @@ from ._common import (
     decode_text,
     make_surface,
     pixel_origin,
+    software_label,
+    software_version_numbers,
     timestamp_from_iso,
     writer_error,
 )
@@ -153,7 +154,9 @@ def encode_zygo_xyz(surface: Surface) -> bytes:
     """Encode a surface as a ZYGO XYZ file.
 
     Heights are written in micrometres with 17 significant digits (float64
-    round trip); invalid pixels as ``No Data``.
+    round trip); invalid pixels as ``No Data``. The header's software fields say
+    servosurf (type 0, ``"servosurf <version>"``), not MetroPro; the same surface
+    gives the same bytes.
 
     Parameters
     ----------
@@ -191,10 +194,13 @@ def encode_zygo_xyz(surface: Surface) -> bytes:
     obj = md.get("objective") if isinstance(md.get("objective"), str) else ""
     zoom = md.get("zoom") if isinstance(md.get("zoom"), str) else ""
     # The header has no room for free-form metadata: only the comment string,
-    # objective, zoom, wavelength, pixel size and date are kept.
+    # objective, zoom, wavelength, pixel size and date are kept. Software type 0
+    # (not MetroPro) and the software string "servosurf <version>": the file is
+    # not labelled as a ZYGO instrument's.
+    maj, mnr, bug = software_version_numbers()
     lines = [
         "Zygo XYZ Data File - Format 1",
-        f"0 0 0 0 {_q('servosurf ' + __version__, 29)}",
+        f"0 {maj} {mnr} {bug} {_q(software_label(), 29)}",
         "0 0 0 0 0 0",
         f"{ox} {oy} {nx} {ny}",
         _q(comment, 81),

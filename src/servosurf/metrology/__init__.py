@@ -20,15 +20,24 @@ _LAZY = {
     # roughness (ISO 4287, 4288, 25178-2)
     "profile_roughness": "._roughness", "areal_roughness": "._roughness",
     "iso4288_cutoff": "._roughness",
+    # ISO 25178-2 field parameters (height, hybrid, spatial, material ratio)
+    "areal_parameters": "._areal", "areal_autocorrelation": "._areal",
     # spectra
     "psd_1d": "._spectrum", "find_peaks_spectrum": "._spectrum",
+    "sampling_alias_bands": "._spectrum",
     # lenslet form
     "nominal_lenslet_profile": "._form", "nominal_lenslet_surface": "._form",
     "form_error_profile": "._form", "lenslet_centre_profile": "._form",
+    # form error against a design surface
+    "form_error_against_design": "._design_form", "DesignFormError": "._design_form",
     "find_deepest_point": "._lenslet", "segment_lenslets": "._lenslet",
     # registration and resampling
     "register_translation": "._register", "shift_surface": "._register",
     "resample": "._register", "remove_form": "._register",
+    # profiles: crop, line through a map, 1-D registration
+    "crop_profile": "._profile", "trim_invalid_ends": "._profile",
+    "profile_through": "._profile", "resample_profile": "._profile",
+    "register_profiles": "._profile", "ProfileRegistration": "._profile",
     # interferometer model
     "Interferometer": "._interferometer", "INSTRUMENTS": "._interferometer",
     "load_instrument": "._interferometer", "measure": "._interferometer",

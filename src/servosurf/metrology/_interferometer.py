@@ -24,6 +24,7 @@ import numpy as np
 import scipy.ndimage as ndi
 import scipy.sparse
 
+from .._random import stream
 from ..config import _check_bounds, from_mapping, load_toml, param, to_mapping
 from ..errors import ConfigError
 from ._surface import Surface
@@ -50,6 +51,11 @@ PSF_SIGMA_FACTOR: float = 0.21
 #: A resampled or blurred pixel is valid when valid source pixels carry at least
 #: this fraction of its weight.
 MIN_VALID_WEIGHT: float = 0.5
+
+#: An input whose pitch is within this fraction of the camera pixel is taken as the
+#: camera grid itself (no resampling): 1 % is below a microscope's lateral
+#: calibration uncertainty.
+SAME_GRID_RTOL: float = 0.01
 
 #: Gaussian kernels are truncated at this many standard deviations.
 _TRUNCATE: float = 4.0
@@ -436,7 +442,7 @@ def _target_grid(
         raise ConfigError(
             f"surface extent {nx_in * surface.dx:g} m x {ny_in * surface.dy:g} m "
             f"holds fewer than 2 x 2 instrument pixels of {p:g} m; use a larger "
-            "map or resample=False"
+            "field (field.nx, field.ny) or no instrument model (--instrument none)"
         )
     cx = surface.x0 + (nx_in - 1) * surface.dx / 2
     cy = surface.y0 + (ny_in - 1) * surface.dy / 2
@@ -465,8 +471,11 @@ def measure(
     resample : bool, default: True
         Resample onto the instrument's camera grid (pixel size
         ``instrument.pixel_size`` in m, at most ``camera_ny x camera_nx`` pixels,
-        centred on the input field and clipped to it). ``False`` keeps the input
-        grid and applies only blur, slope limit, noise and dropouts.
+        centred on the input field and clipped to it). An input whose pitch is
+        within :data:`SAME_GRID_RTOL` of the camera pixel is only cropped to the
+        camera's pixel count, not interpolated (``resampled`` is then False).
+        ``False`` keeps the input grid and applies only blur, slope limit, noise
+        and dropouts.
 
     Returns
     -------
@@ -545,9 +554,24 @@ def measure(
     sigma = inst.psf_sigma
     z, dx, dy = surface.z, float(surface.dx), float(surface.dy)
     x0, y0 = surface.x0, surface.y0
-    if resample:
+    p = inst.pixel_size
+    on_camera_grid = (abs(dx / p - 1.0) <= SAME_GRID_RTOL
+                      and abs(dy / p - 1.0) <= SAME_GRID_RTOL)
+    if resample and on_camera_grid:
+        # the input already is a camera grid (within the lateral calibration
+        # tolerance): crop to the camera's pixel count, no interpolation (a
+        # bilinear resampling by a fraction of a pixel would add a curvature
+        # bias and mix neighbouring rows that no camera makes)
+        ny_c = min(inst.camera_ny, z.shape[0])
+        nx_c = min(inst.camera_nx, z.shape[1])
+        r0 = (z.shape[0] - ny_c) // 2
+        c0 = (z.shape[1] - nx_c) // 2
+        z = z[r0 : r0 + ny_c, c0 : c0 + nx_c]
+        x0, y0 = x0 + c0 * dx, y0 + r0 * dy
+        z = _blur(z, sigma / dy, sigma / dx)
+        resample = False
+    elif resample:
         ny, nx, x0_out, y0_out = _target_grid(surface, inst)
-        p = inst.pixel_size
         if dx <= p * (1 + _PITCH_RTOL) and dy <= p * (1 + _PITCH_RTOL):
             z, dx, dy, x0, y0, s_rows, s_cols = _prebin(z, dx, dy, x0, y0, sigma)
             z = _blur(z, s_rows, s_cols)
@@ -571,7 +595,7 @@ def measure(
     too_steep = np.hypot(gx, gy) > math.tan(inst.max_slope_angle)
     z[too_steep] = np.nan
 
-    rng = np.random.default_rng(int(seed))
+    rng = stream(int(seed), "instrument")  # not the vibration's normal numbers
     noise = rng.standard_normal(z.shape) * inst.noise_rms
     dropped = rng.random(z.shape) < inst.dropout_fraction
     z = z + noise

@@ -1,4 +1,5 @@
-"""Disturbance PSDs, frequency-domain error synthesis (Eqs 8-12), realisations."""
+"""Disturbance PSDs, frequency-domain error synthesis (Eqs 8-12), realisations,
+and the spindle's asynchronous axial error motion."""
 
 from ._psd import (
     PAPER_RECORD_LENGTH,
@@ -9,13 +10,19 @@ from ._psd import (
     welch_psd,
     write_psd_csv,
 )
+from ._spindle import psd_series, realise_spindle_axial
 from ._stream import BLOCK, VibrationStream
 from ._study import (
+    LOOP_STATES,
     DesignStudy,
+    LoopLimit,
     design_study,
+    loop_limit,
+    loop_state,
     optimal_bandwidth,
     rms_at,
     stability_limit,
+    tuning_limit,
 )
 from ._synthesis import SOURCES, ErrorBudget, Realisation, cas, realise, synthesize
 
@@ -27,6 +34,8 @@ __all__ = [
     "read_psd_csv",
     "welch_psd",
     "write_psd_csv",
+    "psd_series",
+    "realise_spindle_axial",
     "BLOCK",
     "VibrationStream",
     "DesignStudy",
@@ -34,6 +43,11 @@ __all__ = [
     "optimal_bandwidth",
     "rms_at",
     "stability_limit",
+    "tuning_limit",
+    "loop_limit",
+    "loop_state",
+    "LoopLimit",
+    "LOOP_STATES",
     "SOURCES",
     "ErrorBudget",
     "Realisation",

@@ -164,12 +164,18 @@ class Realisation:
         Following error the controller would report, in m.
     sources : dict of str to ndarray
         Disturbance time series (sensor noise m, current noise A, base m).
+    out_of_loop : ndarray of shape (n,) or None
+        With ``realise(..., out_of_loop=True)``: the tool error (m) that the same
+        base displacement adds when the sensor's reference surface sits on the FTS
+        base instead of the metrology frame, so that the sensor no longer sees it
+        (``tool + out_of_loop`` is the tool error of that set-up).
     """
 
     fs: float
     tool: np.ndarray
     following: np.ndarray
     sources: dict[str, np.ndarray]
+    out_of_loop: np.ndarray | None = None
 
     @property
     def t(self) -> np.ndarray:
@@ -185,6 +191,7 @@ def realise(
     disturbances: Disturbances | None = None,
     fmin: float | None = None,
     sources: bool = False,
+    out_of_loop: bool = False,
 ) -> Realisation:
     """Draw a seeded realisation of the real and following errors.
 
@@ -209,6 +216,12 @@ def realise(
         :func:`frequency_grid`, so the RMS matches the synthesised CAS.
     sources : bool, default: False
         Also return the disturbance time series (three more inverse FFTs).
+    out_of_loop : bool, default: False
+        Also return the out-of-loop path of the same base displacement
+        (:attr:`Realisation.out_of_loop`): with the sensor target on the FTS base
+        the sensor reads ``hs (x_m - x_g)`` instead of ``hs x_m``, i.e. the loop
+        sees an extra sensor noise ``-hs x_g`` (``hs`` the sensor's double pole of
+        Eq 7), which reaches the tool through the sensor-noise path.
 
     Returns
     -------
@@ -245,6 +258,7 @@ def realise(
 
     tool = np.zeros(f.size, dtype=complex)
     fol = np.zeros(f.size, dtype=complex)
+    bypass = np.zeros(f.size, dtype=complex) if out_of_loop else None
     series = {}
     for name, (inp, _unit) in SOURCES.items():
         w = evaluate_psd(getattr(d, name), fb)
@@ -257,9 +271,16 @@ def realise(
             series[name] = sp.fft.irfft(x, m, workers=-1)[:n]
         tool[band] += path((inp, "tool")) * xb
         fol[band] += path((inp, "following_error")) * xb
+        if bypass is not None and inp == "base":
+            from ..servo._loop import _double_pole
+
+            hs = _double_pole(2j * np.pi * fb, loop.machine.sensor.corner)
+            bypass[band] = path(("sensor_noise", "tool")) * (-hs * xb)
     return Realisation(
         fs=fs,
         tool=sp.fft.irfft(tool, m, workers=-1)[:n],
         following=sp.fft.irfft(fol, m, workers=-1)[:n],
         sources=series,
+        out_of_loop=(None if bypass is None
+                     else sp.fft.irfft(bypass, m, workers=-1)[:n]),
     )

@@ -27,7 +27,9 @@ def _common_grid(a: Surface, b: Surface) -> tuple[Surface, Surface]:
     dx, dy = max(a.dx, b.dx), max(a.dy, b.dy)
 
     def to(s: Surface) -> Surface:
-        if np.isclose(s.dx, dx, rtol=1e-9) and np.isclose(s.dy, dy, rtol=1e-9):
+        if np.isclose(s.dx, dx, rtol=1e-9, atol=0.0) and np.isclose(
+            s.dy, dy, rtol=1e-9, atol=0.0
+        ):  # no absolute tolerance: pixel sizes are ~1e-7 m
             return s
         return resample(s, dx, dy)
 
@@ -74,10 +76,19 @@ def compare_surfaces(
         ``rms_residual_m``, ``pv_residual_m``, ``fit_percent`` (MATLAB-style
         ``100 (1 - ||residual|| / ||measured - mean||)`` with the removed form
         terms), ``correlation``, ``peaks_measured``,
-        ``peaks_simulated`` and ``peaks_matched`` (1/m), plus arrays for plotting
-        under ``_plots``.
+        ``peaks_simulated`` and ``peaks_matched`` (1/m), ``areal`` (the ISO 25178-2
+        parameters of :func:`~servosurf.metrology.areal_parameters` of each map
+        side by side, see Notes), plus arrays for plotting under ``_plots``.
+
+    Notes
+    -----
+    ``areal["measured"]`` and ``areal["simulated"]`` are evaluated on the same
+    pixels (valid in both maps after resampling and registration) with the same
+    F-operation (the ``remove`` terms fitted to each map separately; the mean
+    height when ``remove`` is empty) and no S- or L-filter.
     """
     from ..metrology import (
+        areal_parameters,
         find_peaks_spectrum,
         psd_1d,
         register_translation,
@@ -157,6 +168,17 @@ def compare_surfaces(
         best = min(pk_s, key=lambda b: abs(b - a), default=None)
         if best is not None and abs(best - a) <= PEAK_MATCH_RTOL * a:
             matched.append([a, best])
+    areal: dict[str, Any] = {}
+    for key, surf in (("measured", m), ("simulated", s)):
+        common = surf.replace(z=np.where(both, surf.z, np.nan))
+        if remove:
+            common = remove_form(common, terms=tuple(remove))
+        areal[key] = areal_parameters(common)
+    areal["evaluated_on"] = (
+        "pixels valid in both maps after registration; form removed per map: "
+        + (" ".join(remove) if remove else "mean height")
+        + "; no S- or L-filter"
+    )
     return {
         "pixel_m": [m.dy, m.dx],
         "shape": list(m.shape),
@@ -171,6 +193,7 @@ def compare_surfaces(
         "peaks_measured_per_m": pk_m,
         "peaks_simulated_per_m": pk_s,
         "peaks_matched_per_m": matched,
+        "areal": areal,
         "_plots": {
             "measured": m,
             "simulated": s,

@@ -1,5 +1,6 @@
 """Mechatronic model of the FTS: plant (Eqs 1-7), PIDF, tuning, closed loop."""
 
+from ._axis import AXIS_MODELS, AxisModel
 from ._ident import (
     DEFAULT_IDENT_PARAMS,
     Identification,
@@ -13,6 +14,7 @@ from ._ident import (
 )
 from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, tune_pidf
 from ._machine import (
+    PROVENANCE_KINDS,
     Actuator,
     Controller,
     Disturbances,
@@ -20,13 +22,23 @@ from ._machine import (
     Mechanics,
     PSDModel,
     Sensor,
+    Spindle,
     builtin_machines,
     describe_machine,
     load_machine,
 )
+from ._perturb import (
+    NL_FIELDS,
+    LoopPerturbation,
+    Nonlinearity,
+    StructuralMode,
+)
 from ._plant import Plant, paper_eq_frf, plant_from_machine
 
 __all__ = [
+    "AxisModel",
+    "AXIS_MODELS",
+    "PROVENANCE_KINDS",
     "Actuator",
     "Controller",
     "Disturbances",
@@ -34,6 +46,7 @@ __all__ = [
     "Mechanics",
     "PSDModel",
     "Sensor",
+    "Spindle",
     "builtin_machines",
     "describe_machine",
     "load_machine",
@@ -54,4 +67,8 @@ __all__ = [
     "ServoLoop",
     "tune_pidf",
     "PATHS",
+    "LoopPerturbation",
+    "Nonlinearity",
+    "StructuralMode",
+    "NL_FIELDS",
 ]

@@ -12,7 +12,7 @@ import numpy as np
 import scipy as sp
 
 from ..errors import ConfigError
-from ._loop import ServoLoop
+from ._loop import loop_elements, plant_gain
 from ._machine import Machine
 
 __all__ = [
@@ -114,22 +114,8 @@ def open_loop_frf(
     ``G = ZOH * delay * G_I w_I^2/(s+w_I)^2 * B l * P(x_meas/Fa) * S w_s^2/(s+w_s)^2``;
     ``digital=False`` leaves out the ZOH and delay (an analogue sweep).
     """
-    loop = ServoLoop.__new__(ServoLoop)
-    loop.machine = machine
-    from ._plant import plant_from_machine
-
-    loop.plant = plant_from_machine(machine)
-    loop._dss_cache = None
-    ch = loop._chain(np.asarray(freq, float), discrete=digital)
-    pa = ch["plant"]["actuator_force"][:, loop._sensor_dof()]
-    return (
-        ch["delay"]
-        * ch["amp"]
-        * machine.actuator.force_constant
-        * pa
-        * ch["sens"]
-        * machine.sensor.sensitivity
-    )
+    ch = loop_elements(machine, np.asarray(freq, float), discrete=digital)
+    return plant_gain(ch, machine)
 
 
 def _split(key: str) -> tuple[str, str]:
@@ -152,13 +138,28 @@ def get_param(machine: Machine, key: str) -> float:
         raise ConfigError(f"machine parameter {key!r} is not numeric") from None
 
 
+#: Provenance label of a number replaced by :func:`set_param` (a fit's value).
+SET_PARAM_LABEL = "derived: set by a fit (servosurf.servo.set_param), not calibrated"
+
+
 def set_param(machine: Machine, key: str, value: float) -> Machine:
-    """Copy of ``machine`` with one dotted parameter replaced."""
+    """Copy of ``machine`` with one dotted parameter replaced.
+
+    The parameter's provenance label (if the machine has a ``[provenance]`` table)
+    becomes :data:`SET_PARAM_LABEL`: the built-in's label described its own value.
+    """
     sec, name = _split(key)
     section = getattr(machine, sec)
-    return dataclasses.replace(
+    out = dataclasses.replace(
         machine, **{sec: dataclasses.replace(section, **{name: value})}
     )
+    if machine.provenance:
+        dotted = f"{sec}.{name}".replace("_", "-")
+        prov = dict(machine.provenance)
+        if dotted in prov:
+            prov[dotted] = SET_PARAM_LABEL
+            out = dataclasses.replace(out, provenance=tuple(sorted(prov.items())))
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -31,8 +31,14 @@ force lag); the tuning raises :class:`~servosurf.errors.ModelError` when no posi
 ``exp(-j w tau)``: the standard sampled-data approximation, valid below Nyquist.
 Stability and time responses use the exact discretisation: the analogue part
 (amplifier, mechanics, sensor) discretised with a ZOH at the controller rate, the
-Tustin PIDF, and the delay as a shift register (fractional delays interpolate
-linearly between two registers).
+Tustin PIDF, and the delay as a shift register. A fractional delay is exact (the
+modified z-transform): the DAC updates ``frac`` of a sample after the sample, so over
+each sample the plant sees the older command for ``frac T`` and the newer for
+``(1 - frac) T``, two input columns of the discretised analogue part. The frequency
+model's ``exp(-s tau)`` times the ZOH is then the same loop (tests compare the two).
+
+The DAC command passes the amplifier's nonlinear stages (dead band, quantisation,
+saturation, :class:`~servosurf.servo.Nonlinearity`) before it is held.
 """
 
 from __future__ import annotations
@@ -44,9 +50,16 @@ import scipy as sp
 
 from ..errors import ModelError
 from ._machine import Machine
+from ._perturb import (
+    NO_NONLINEARITY,
+    NOMINAL_PERTURBATION,
+    LoopPerturbation,
+    Nonlinearity,
+)
 from ._plant import Plant, plant_from_machine
 
 __all__ = ["PIDF", "ServoLoop", "tune_pidf", "LoopFRF", "PATHS"]
+
 
 #: Disturbance inputs of the closed loop.
 INPUTS = ("reference", "sensor_noise", "current_noise", "base", "force")
@@ -149,29 +162,131 @@ class LoopFRF:
         return self.loop / (1.0 + self.loop)
 
 
+def _zoh(a: np.ndarray, b: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(exp(A tau), int_0^tau exp(A s) ds B)``: ZOH discretisation over ``tau``."""
+    n, m = a.shape[0], b.shape[1]
+    big = np.zeros((n + m, n + m))
+    big[:n, :n] = a * tau
+    big[:n, n:] = b * tau
+    e = sp.linalg.expm(big)
+    return e[:n, :n], e[:n, n:]
+
+
+def loop_elements(
+    machine: Machine,
+    freq: np.ndarray,
+    *,
+    discrete: bool = True,
+    plant: Plant | None = None,
+    modes: tuple = (),
+) -> dict[str, np.ndarray]:
+    """Frequency responses of the loop's elements at ``freq`` (Hz).
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``amp`` (amplifier, A/V), ``sens`` (sensor filter, -), ``delay`` (ZOH and
+        computation delay, or ones when not ``discrete``), ``plant`` (the network's
+        FRFs, :meth:`Plant.frf`), ``pa1`` and ``pam`` (actuator force to tool and to
+        the measured DOF, m/N, extra ``modes`` included).
+    """
+    s = 2j * np.pi * np.asarray(freq, dtype=float)
+    t = 1.0 / machine.controller.sample_rate
+    amp = machine.actuator.current_gain * _double_pole(s, machine.actuator.corner)
+    sens = _double_pole(s, machine.sensor.corner)
+    if discrete:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            zoh = np.where(np.abs(s) > 0, (1 - np.exp(-s * t)) / (s * t), 1.0)
+        delay = zoh * np.exp(-s * machine.controller.delay * t)
+    else:
+        delay = np.ones_like(s)
+    p = (plant if plant is not None else plant_from_machine(machine)).frf(freq)
+    pa = p["actuator_force"]
+    sd = 1 if machine.sensor.location == "carrier" else 0
+    pa1, pam = pa[:, 0], pa[:, sd]
+    if modes:
+        hr = sum(m.response(s) for m in modes)
+        pa1, pam = pa1 + hr, pam + hr
+    return {"amp": amp, "sens": sens, "delay": delay, "plant": p, "pa1": pa1,
+            "pam": pam}
+
+
+def plant_gain(elements: dict[str, np.ndarray], machine: Machine) -> np.ndarray:
+    """DAC volts to sensor volts (V/V) from :func:`loop_elements`."""
+    return (
+        elements["delay"]
+        * elements["amp"]
+        * machine.actuator.force_constant
+        * elements["pam"]
+        * elements["sens"]
+        * machine.sensor.sensitivity
+    )
+
+
 class ServoLoop:
     """The closed FTS loop of a machine with a given (or tuned) PIDF.
 
     Parameters
     ----------
     machine : Machine
-        Machine definition. When its controller gains are unset they are tuned for
-        ``machine.controller.bandwidth`` with :func:`tune_pidf`.
+        Machine definition (the installed, nominal machine). When its controller
+        gains are unset they are tuned for ``machine.controller.bandwidth`` with
+        :func:`tune_pidf`.
     pidf : PIDF, optional
         Explicit controller (overrides the machine's).
+    perturbation : LoopPerturbation, optional
+        A change of the plant the controller does not know about (extra delay,
+        extra modes, recalibrated parameters); the controller stays the one of
+        ``machine`` (or ``pidf``). Every method also takes a ``perturbation``
+        argument, evaluated against the same installed machine and controller.
+
+    Notes
+    -----
+    ``machine`` is the machine the loop runs (the perturbation applied), and
+    ``installed`` the machine the controller was tuned for.
     """
 
-    def __init__(self, machine: Machine, pidf: PIDF | None = None) -> None:
-        self.machine = machine
-        self.plant: Plant = plant_from_machine(machine)
+    def __init__(
+        self,
+        machine: Machine,
+        pidf: PIDF | None = None,
+        *,
+        perturbation: LoopPerturbation | None = None,
+    ) -> None:
+        self.installed = machine
         if pidf is None:
             c = machine.controller
             if c.kp is not None:
                 pidf = PIDF(c.kp, c.ki, c.kd, c.tf, c.sample_rate)  # type: ignore[arg-type]
             else:
-                pidf = tune_pidf(machine, plant=self.plant)
+                pidf = tune_pidf(machine)
         self.pidf = pidf
+        pert = NOMINAL_PERTURBATION if perturbation is None else perturbation
+        self.perturbation = pert
+        self.machine = pert.apply(machine) if not pert.is_nominal else machine
+        self.plant: Plant = plant_from_machine(self.machine)
+        self.modes = pert.modes
         self._dss_cache: tuple | None = None
+        self._variants: dict = {}
+
+    def perturbed(self, perturbation: LoopPerturbation | None) -> ServoLoop:
+        """The loop of the installed machine and controller under ``perturbation``.
+
+        ``None`` returns this loop. Loops are cached per perturbation (frozen and
+        hashable), so repeated calls reuse their discrete models.
+        """
+        if perturbation is None or perturbation == self.perturbation:
+            return self
+        hit = self._variants.get(perturbation)
+        if hit is None:
+            if len(self._variants) > 256:
+                for k in list(self._variants)[:128]:
+                    del self._variants[k]
+            if perturbation.is_nominal and self.perturbation.is_nominal:
+                return self
+            hit = ServoLoop(self.installed, self.pidf, perturbation=perturbation)
+            self._variants[perturbation] = hit
+        return hit
 
     # ------------------------------------------------------------ frequency
     @property
@@ -183,37 +298,42 @@ class ServoLoop:
         return 1 if self.machine.sensor.location == "carrier" else 0
 
     def _chain(self, freq: np.ndarray, discrete: bool = True) -> dict[str, np.ndarray]:
-        """Elements of the loop at ``freq`` (Hz)."""
-        mach = self.machine
-        s = 2j * np.pi * np.asarray(freq, dtype=float)
-        t = 1.0 / self.fs
-        amp = mach.actuator.current_gain * _double_pole(s, mach.actuator.corner)
-        sens = _double_pole(s, mach.sensor.corner)
-        if discrete:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                zoh = np.where(np.abs(s) > 0, (1 - np.exp(-s * t)) / (s * t), 1.0)
-            delay = zoh * np.exp(-s * mach.controller.delay * t)
-        else:
-            delay = np.ones_like(s)
-        p = self.plant.frf(freq)
-        return {"amp": amp, "sens": sens, "delay": delay, "plant": p}
+        """Elements of the loop at ``freq`` (Hz); modes added to the actuator path."""
+        return loop_elements(self.machine, freq, discrete=discrete, plant=self.plant,
+                             modes=self.modes)
 
-    def loop_gain(self, freq: np.ndarray, *, discrete: bool = True) -> np.ndarray:
+    def loop_gain(
+        self,
+        freq: np.ndarray,
+        *,
+        discrete: bool = True,
+        perturbation: LoopPerturbation | None = None,
+    ) -> np.ndarray:
         """Open-loop gain ``L`` at ``freq`` (Hz), broken at the controller input."""
-        ch = self._chain(freq, discrete)
-        m = self.machine
-        pa = ch["plant"]["actuator_force"][:, self._sensor_dof()]
-        g = (
-            ch["delay"]
-            * ch["amp"]
-            * m.actuator.force_constant
-            * pa
-            * ch["sens"]
-            * m.sensor.sensitivity
-        )
-        return self.pidf.frf(freq, discrete=discrete) * g
+        lp = self.perturbed(perturbation)
+        return lp.pidf.frf(freq, discrete=discrete) * lp._plant_gain(freq, discrete)
 
-    def frf(self, freq: np.ndarray, *, discrete: bool = True) -> LoopFRF:
+    def _plant_gain(self, freq: np.ndarray, discrete: bool) -> np.ndarray:
+        return plant_gain(self._chain(freq, discrete), self.machine)
+
+    def open_loop(
+        self, freq: np.ndarray, *, perturbation: LoopPerturbation | None = None
+    ) -> np.ndarray:
+        """Open-loop plant from the DAC to the sensor reading at ``freq`` (Hz), V/V.
+
+        What a controller measures when it injects a sine at its DAC and reads its
+        ADC: the computation delay and the zero-order hold included, the
+        controller itself not.
+        """
+        return self.perturbed(perturbation)._plant_gain(freq, True)
+
+    def frf(
+        self,
+        freq: np.ndarray,
+        *,
+        discrete: bool = True,
+        perturbation: LoopPerturbation | None = None,
+    ) -> LoopFRF:
         """Closed-loop FRFs from every disturbance to tool, sensor and following error.
 
         Parameters
@@ -224,12 +344,17 @@ class ServoLoop:
             Include ZOH, delay and Tustin warping (sampled-data approximation).
             ``False`` gives the purely continuous loop (for comparison with
             python-control).
+        perturbation : LoopPerturbation, optional
+            Plant change under the installed controller.
 
         Returns
         -------
         LoopFRF
             Open-loop gain and every closed-loop path.
         """
+        lp = self.perturbed(perturbation)
+        if lp is not self:
+            return lp.frf(freq, discrete=discrete)
         freq = np.asarray(freq, dtype=float)
         mach = self.machine
         ch = self._chain(freq, discrete)
@@ -242,7 +367,7 @@ class ServoLoop:
         gu = ch["amp"] * bl  # N per V
         hs = ch["sens"]
         pl = ch["plant"]
-        pa1, pam = pl["actuator_force"][:, 0], pl["actuator_force"][:, sd]
+        pa1, pam = ch["pa1"], ch["pam"]
         loop = k * gu * pam * hs
         one_l = 1.0 + loop
         paths: dict[tuple[str, str], np.ndarray] = {}
@@ -321,24 +446,34 @@ class ServoLoop:
         return out
 
     # ------------------------------------------------------------ discrete
-    def analogue_ss(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Continuous state space of amplifier + mechanics + sensor.
+    def analogue_ss(
+        self, *, perturbation: LoopPerturbation | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Continuous state space of amplifier + mechanics + sensor (+ extra modes).
 
         Returns
         -------
-        A : ndarray of shape (12, 12)
-        B : ndarray of shape (12, 3)
+        A : ndarray of shape (12 + 2 m, 12 + 2 m)
+            States ``[I, dI/dt, x1..x4, v1..v4, y, dy/dt]`` then ``[q, dq/dt]`` per
+            extra mode (m modes).
+        B : ndarray of shape (12 + 2 m, 3)
             Inputs ``[u (V), i_n (A), F (N)]``.
-        C : ndarray of shape (2, 12)
-            Outputs ``[x1 (m), sensor-filtered position (m)]``.
+        C : ndarray of shape (7, 12 + 2 m)
+            Outputs of :data:`servosurf.kernels._lti.CX_ROWS`: tool x1 (m), sensor-
+            filtered measured position y (m), coil current I (A), x2, x3 (m), v2,
+            v3 (m/s).
         """
+        lp = self.perturbed(perturbation)
+        if lp is not self:
+            return lp.analogue_ss()
         mach = self.machine
         wi, ws = mach.actuator.corner, mach.sensor.corner
         am, bm, cx = self.plant.state_space()
-        n = 2 + 8 + 2
+        n0 = 2 + 8 + 2
+        n = n0 + 2 * len(self.modes)
         a = np.zeros((n, n))
         b = np.zeros((n, 3))
-        c = np.zeros((2, n))
+        c = np.zeros((7, n))
         # amplifier: I = G_I wi^2/(s+wi)^2 u ; states [I, dI/dt]
         a[0, 1] = 1.0
         a[1, 0] = -(wi**2)
@@ -358,38 +493,77 @@ class ServoLoop:
         a[11, 2:10] = ws**2 * xm
         c[0, 2:10] = cx[0]
         c[1, 10] = 1.0
+        c[2, 0] = 1.0
+        c[3, 3] = 1.0
+        c[4, 4] = 1.0
+        c[5, 7] = 1.0
+        c[6, 8] = 1.0
+        # extra modes: q'' + 2 z w q' + w^2 q = w^2 g Bl (I + i_n), q adds to the
+        # tool and to the measured position
+        for j, mode in enumerate(self.modes):
+            o = n0 + 2 * j
+            wr = 2 * np.pi * mode.frequency
+            a[o, o + 1] = 1.0
+            a[o + 1, o] = -(wr**2)
+            a[o + 1, o + 1] = -2 * mode.damping * wr
+            a[o + 1, 0] = wr**2 * mode.gain * bl
+            b[o + 1, 1] = wr**2 * mode.gain * bl
+            a[11, o] += ws**2
+            c[0, o] = 1.0
         return a, b, c
 
-    def discrete_models(self):
+    def discrete_models(self, *, perturbation: LoopPerturbation | None = None):
         """ZOH-discretised analogue part and Tustin controller (cached).
 
         Returns
         -------
         tuple
-            ``(Ad, Bd, Cy, Ac, Bc, Cc, Dc)`` at the controller rate.
+            ``(Ad, Bd, Cx, Ac, Bc, Cc, Dc)`` at the controller rate; ``Cx`` the 7
+            output rows of :meth:`analogue_ss`. ``Bd`` has four columns: the
+            command applied over the late part of the sample (the newer command,
+            ``u[k - nd]``), current (A), tool force (N), and the command applied
+            over its early part (``u[k - nd - 1]``, zero for a whole-sample delay);
+            ``nd, frac = delay_split()``.
         """
+        lp = self.perturbed(perturbation)
+        if lp is not self:
+            return lp.discrete_models()
         if self._dss_cache is None:
             a, b, c = self.analogue_ss()
             t = 1.0 / self.fs
-            n, m = a.shape[0], b.shape[1]
-            big = np.zeros((n + m, n + m))
-            big[:n, :n] = a * t
-            big[:n, n:] = b * t
-            e = sp.linalg.expm(big)
-            ad, bd = e[:n, :n], e[:n, n:]
+            frac = self.delay_split()[1]
+            # exact ZOH discretisation with the DAC update frac T after the sample
+            # (modified z-transform): over [kT, (k+1)T) the plant sees the older
+            # command for frac T, then the newer one for (1 - frac) T
+            e_new, g_new = _zoh(a, b, (1.0 - frac) * t)
+            e_old, g_old = _zoh(a, b[:, :1], frac * t)
+            e_full, g_full = _zoh(a, b, t)
+            ad = np.ascontiguousarray(e_full)
+            bd = np.zeros((a.shape[0], 4))
+            bd[:, :3] = g_full
+            bd[:, 0] = g_new[:, 0]
+            bd[:, 3] = (e_new @ g_old)[:, 0]
             ac, bc, cc, dc = self.pidf.discrete_ss()
-            self._dss_cache = (ad, bd, c, ac, bc, cc, dc)
+            self._dss_cache = (ad, np.ascontiguousarray(bd), np.ascontiguousarray(c),
+                               ac, bc, cc, dc)
         return self._dss_cache
 
-    def _delay_split(self) -> tuple[int, float]:
+    def delay_split(self) -> tuple[int, float]:
+        """Loop delay in controller samples: ``(whole samples, fraction)``."""
         d = self.machine.controller.delay
         nd = int(np.floor(d))
         return nd, float(d - nd)
 
-    def closed_loop_matrix(self) -> np.ndarray:
+
+    def closed_loop_matrix(
+        self, *, perturbation: LoopPerturbation | None = None
+    ) -> np.ndarray:
         """State matrix of the exact discrete closed loop (analogue + PIDF + delay)."""
+        lp = self.perturbed(perturbation)
+        if lp is not self:
+            return lp.closed_loop_matrix()
         ad, bd, cy, ac, bc, cc, dc = self.discrete_models()
-        nd, frac = self._delay_split()
+        nd, frac = self.delay_split()
         nb = nd + 2  # registers u[k], u[k-1], ..., u[k-nd-1]
         na, nc = ad.shape[0], ac.shape[0]
         s = self.machine.sensor.sensitivity
@@ -410,29 +584,29 @@ class ServoLoop:
         for j in range(1, nb):
             a[o + j, o + j - 1] = 1.0
 
-        # applied input at step k: (1-frac) u[k-nd] + frac u[k-nd-1]
+        # applied input at step k: bd_new u[k-nd] + bd_old u[k-nd-1]
         # u[k-nd] is register nd after this step's shift, i.e. register nd-1 before
         # (or the freshly computed u for nd = 0).
-        def add_applied(col: int, weight: float) -> None:
+        def add_applied(col: int, b_col: np.ndarray) -> None:
             if col == 0:
-                a[:na, :na] += weight * np.outer(bd[:, 0], u_row_a)
-                a[:na, na : na + nc] += weight * np.outer(bd[:, 0], u_row_c)
+                a[:na, :na] += np.outer(b_col, u_row_a)
+                a[:na, na : na + nc] += np.outer(b_col, u_row_c)
             else:
-                a[:na, o + col - 1] += weight * bd[:, 0]
+                a[:na, o + col - 1] += b_col
 
         a[:na, :na] += ad
-        add_applied(nd, 1.0 - frac)
+        add_applied(nd, bd[:, 0])
         if frac > 0:
-            add_applied(nd + 1, frac)
+            add_applied(nd + 1, bd[:, 3])
         return a
 
-    def poles(self) -> np.ndarray:
+    def poles(self, *, perturbation: LoopPerturbation | None = None) -> np.ndarray:
         """Closed-loop poles of the exact discrete loop (z-plane)."""
-        return np.linalg.eigvals(self.closed_loop_matrix())
+        return np.linalg.eigvals(self.closed_loop_matrix(perturbation=perturbation))
 
-    def is_stable(self) -> bool:
+    def is_stable(self, *, perturbation: LoopPerturbation | None = None) -> bool:
         """True when every discrete closed-loop pole lies inside the unit circle."""
-        return bool(np.max(np.abs(self.poles())) < 1.0)
+        return bool(np.max(np.abs(self.poles(perturbation=perturbation))) < 1.0)
 
     # ------------------------------------------------------------ time domain
     def simulate(
@@ -445,8 +619,12 @@ class ServoLoop:
         n: int | None = None,
         chip=None,
         chip_offset: np.ndarray | None = None,
+        perturbation: LoopPerturbation | None = None,
+        nonlinearity: Nonlinearity | None = None,
     ) -> dict[str, np.ndarray]:
         """Simulate the exact discrete closed loop sample by sample.
+
+        The loop starts at rest (all states zero) at the first sample.
 
         Parameters
         ----------
@@ -466,15 +644,22 @@ class ServoLoop:
         chip_offset : ndarray of shape (n,), optional
             Height in m added to the simulated x1 before the chip model sees it (use
             the commanded path when simulating deviations about it).
+        perturbation : LoopPerturbation, optional
+            Plant change under the installed controller.
+        nonlinearity : Nonlinearity, optional
+            Memoryless and hysteretic terms of the loop.
 
         Returns
         -------
         dict of str to ndarray of shape (n,)
             ``tool`` (x1, m), ``sensor`` (measured position, m), ``following_error``
-            (r - measured, m), ``u`` (V), ``force`` (N, total applied).
+            (r - measured, m), ``u`` (V), ``force`` (N, total applied), ``current``
+            (coil current, A). Views of one (6, n) buffer. Non-finite values mean
+            the loop diverged.
         """
         from ..kernels._lti import _closed_loop_sim
 
+        lp = self.perturbed(perturbation)
         arrays = [
             a for a in (reference, force, current_noise, sensor_noise) if a is not None
         ]
@@ -496,45 +681,49 @@ class ServoLoop:
         r, f, i_n, s_n, z_off = map(
             prep, (reference, force, current_noise, sensor_noise, chip_offset)
         )
-        ad, bd, cy, ac, bc, cc, dc = self.discrete_models()
-        nd, frac = self._delay_split()
+        ad, bd, cx, ac, bc, cc, dc = lp.discrete_models()
+        nd = lp.delay_split()[0]
         if chip is None:
             chip_kind, chip_par = 0, np.zeros(4)
         else:
             chip_kind, chip_par = chip.kernel_args()
-        out = np.zeros((5, n))
-        _closed_loop_sim(
-            ad,
-            bd,
-            cy,
-            ac,
-            bc,
-            cc.ravel().copy(),
-            float(dc.ravel()[0]),
-            self.machine.sensor.sensitivity,
-            nd,
-            frac,
-            r,
-            f,
-            i_n,
-            s_n,
-            z_off,
-            chip_kind,
-            chip_par,
-            out,
-        )
+        mach = lp.machine
+        nl = (nonlinearity or NO_NONLINEARITY).vector(mach.actuator.current_gain)
+        out = np.zeros((6, n))
+        with np.errstate(all="ignore"):
+            _closed_loop_sim(
+                ad,
+                bd,
+                cx,
+                ac,
+                bc,
+                cc.ravel().copy(),
+                float(dc.ravel()[0]),
+                mach.sensor.sensitivity,
+                nd,
+                r,
+                f,
+                i_n,
+                s_n,
+                z_off,
+                chip_kind,
+                chip_par,
+                nl,
+                mach.actuator.force_constant,
+                1.0 / lp.fs,
+                out,
+            )
         return {
             "tool": out[0],
             "sensor": out[1],
             "following_error": out[2],
             "u": out[3],
             "force": out[4],
+            "current": out[5],
         }
 
 
-def tune_pidf(
-    machine: Machine, *, plant: Plant | None = None, bandwidth: float | None = None
-) -> PIDF:
+def tune_pidf(machine: Machine, *, bandwidth: float | None = None) -> PIDF:
     """Tune a PIDF for a crossover frequency and phase margin.
 
     Parameters
@@ -542,8 +731,6 @@ def tune_pidf(
     machine : Machine
         Machine; uses ``controller.bandwidth`` (Hz), ``phase-margin`` (deg),
         ``integral-ratio`` (rho) and ``derivative-filter-ratio`` (N).
-    plant : Plant, optional
-        Pre-assembled plant.
     bandwidth : float, optional
         Crossover frequency in Hz overriding the machine's.
 
@@ -572,13 +759,7 @@ def tune_pidf(
     ki_ratio = c.integral_ratio * wc
     tf = 1.0 / (c.derivative_filter_ratio * wc)
     probe = PIDF(1.0, 0.0, 0.0, tf, c.sample_rate)
-    dummy = ServoLoop.__new__(ServoLoop)
-    dummy.machine = machine
-    dummy.plant = plant if plant is not None else plant_from_machine(machine)
-    dummy.pidf = probe
-    dummy._dss_cache = None
-    f = np.array([fc])
-    g = dummy.loop_gain(f)[0]  # with C = 1 (kp=1, ki=kd=0)
+    g = ServoLoop(machine, probe).loop_gain(np.array([fc]))[0]  # C = 1 (kp=1)
     s = 1j * 2 * c.sample_rate * np.tan(wc / (2 * c.sample_rate))
     a_term = 1.0 + ki_ratio / s
     b_term = s / (tf * s + 1.0)

@@ -12,8 +12,19 @@ Decisions recorded here (see also the module docstrings of ``_plant`` and ``_loo
 * The sensor is fixed to the coil carrier (m2) as the paper's text says; Eq 7's ``x1``
   is available as ``sensor.location = "tool"``.
 * "Moving mass" means m1 + m2 (paper section 3.3). Extra mass (the glued steel blocks)
-  is added to ``mechanics.added-mass-on`` (m2 by default: the blocks are glued to the
-  tool holder, which is part of the rigid coil-carrier body).
+  is added to ``mechanics.added-mass-on``. A file that omits the key puts it on m2
+  (a tool holder that is part of the rigid coil-carrier body); the built-in
+  ``seed-prototype`` puts it on m1, the tool body, as the paper's "steel blocks glued
+  onto the tool holder" (4.1) reads, and only that placement gives the paper's
+  measured instability above 1.6 kHz at 0.175 kg: with the blocks on m2 the loop
+  stays stable (16.8 dB of gain margin at 1448 Hz) until the tuning rule runs out of
+  positive gains. ``servosurf paper`` reports both placements and the pole that
+  leaves the unit circle (the 11.7 kHz appendage mode, not the tool mode).
+* Every number of a machine file may carry a provenance label in its
+  ``[provenance]`` table (``paper: ...``, ``assumed: ...``, ``derived: ...``,
+  ``target:<figure keys>``); the built-in file is written by
+  :func:`servosurf.calibration.calibrate`, and ``servosurf machines --describe``
+  prints the same labels.
 """
 
 from __future__ import annotations
@@ -26,6 +37,7 @@ from typing import Literal
 
 from ..config import describe, from_mapping, load_toml, param, to_mapping
 from ..errors import ConfigError
+from ._axis import AxisModel
 
 __all__ = [
     "Mechanics",
@@ -34,11 +46,13 @@ __all__ = [
     "Controller",
     "PSDModel",
     "Disturbances",
+    "Spindle",
     "Machine",
     "load_machine",
     "builtin_machines",
     "describe_machine",
     "MINUS_3DB_DOUBLE_POLE",
+    "PROVENANCE_KINDS",
 ]
 
 #: -3 dB frequency of 1/(1 + s/w)^2 relative to w: sqrt(sqrt(2) - 1).
@@ -222,6 +236,15 @@ class Sensor:
         doc="mass the sensor measures: carrier (x2) or tool (x1)",
         source="paper text: fixed to the coil carrier",
     )
+    target: Literal["metrology-frame", "fts-base"] = param(
+        "metrology-frame",
+        doc="where the sensor's reference surface sits: on the metrology frame that "
+        "carries the spindle and workpiece (base motion inside the loop) or on the "
+        "FTS base (frame-to-spindle motion bypasses the loop; simulate part "
+        "'out-of-loop')",
+        source="paper 2.2: the sensor targets 'a ground flat surface', where is not "
+        "stated; a separate metrology frame forms the loop to the spindle (Fig. 3)",
+    )
 
     @property
     def corner(self) -> float:
@@ -348,6 +371,37 @@ class Disturbances:
     )
 
 
+def _default_axial_error() -> PSDModel:
+    return PSDModel(floor=3.5e-11, corner=500.0, order=2.0)
+
+
+@dataclass(frozen=True)
+class Spindle:
+    """The workpiece spindle's asynchronous axial error motion (outside the FTS loop).
+
+    The default PSD is white at 3.5e-11 m/sqrt(Hz) rolled off above 500 Hz
+    (second order): 0.98 nm RMS, a few nm of asynchronous error value (the width of
+    the band, ISO 230-7), the level of a good air-bearing spindle.
+    """
+
+    axial_error: PSDModel = param(
+        default_factory=_default_axial_error,
+        unit="m^2/Hz",
+        doc="PSD of the asynchronous axial error motion of the spindle face",
+        source="assumed 1 nm RMS: air-bearing spindles show nanometre asynchronous "
+        "axial error (Grejda, PhD thesis, Penn State 2002; Lion Precision: most air "
+        "bearings below 1 uin = 25 nm); measure it per ISO 230-7",
+    )
+    fmin: float = param(
+        0.05,
+        unit="Hz",
+        low=0.0,
+        low_open=True,
+        doc="lowest frequency of the realised axial error",
+        source="assumed (a flat-face field takes about a minute to cut)",
+    )
+
+
 @dataclass(frozen=True)
 class Machine:
     """Root of a machine file."""
@@ -361,6 +415,14 @@ class Machine:
     disturbances: Disturbances = param(default_factory=Disturbances)
     alternative_disturbances: tuple[Disturbances, ...] = param(
         default_factory=tuple, doc="other named calibrations of the disturbances"
+    )
+    # tool Z axis: the FTS loop above (default), a second-order axis or none
+    axis: AxisModel = param(default_factory=AxisModel)
+    spindle: Spindle = param(default_factory=Spindle)
+    provenance: tuple[tuple[str, str], ...] = param(
+        default_factory=tuple,
+        doc="[provenance] table: dotted key -> 'paper: ...', 'assumed: ...', "
+        "'derived: ...' or 'target:<figures>'",
     )
     path: str = param("", doc="file this machine was read from (set by the loader)")
 
@@ -423,6 +485,9 @@ class Machine:
         """
         m = to_mapping(self)
         m.pop("path", None)
+        prov = m.pop("provenance", None)
+        if prov:
+            m["provenance"] = {k: v for k, v in prov}
         return m
 
 
@@ -435,13 +500,34 @@ def _resolve_csv(machine: Machine, base: Path) -> Machine:
                 kw[name] = dataclasses.replace(psd, csv=str((base / psd.csv).resolve()))
         return dataclasses.replace(d, **kw) if kw else d
 
+    spindle = machine.spindle
+    ax = spindle.axial_error
+    if ax.csv and not Path(ax.csv).is_absolute():
+        spindle = dataclasses.replace(
+            spindle, axial_error=dataclasses.replace(
+                ax, csv=str((base / ax.csv).resolve())))
     return dataclasses.replace(
         machine,
         disturbances=fix(machine.disturbances),
         alternative_disturbances=tuple(
             fix(d) for d in machine.alternative_disturbances
         ),
+        spindle=spindle,
     )
+
+
+def _dotted_keys(data: dict, prefix: str = "") -> list[str]:
+    """Dotted keys of a TOML mapping's leaves (tables of tables flattened)."""
+    out = []
+    for k, v in data.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if key == "provenance":
+            continue
+        if isinstance(v, dict):
+            out.extend(_dotted_keys(v, key))
+        else:
+            out.append(key)
+    return out
 
 
 def _merge(base: dict, over: dict) -> dict:
@@ -501,13 +587,33 @@ def load_machine(source: str | Path | None = None) -> Machine:
             )
     data = load_toml(path)
     parent = data.pop("inherit", None)
-    if parent is not None:
-        if not isinstance(parent, str) or parent not in builtins:
+    seen: set[str] = set()
+    while parent is not None:  # a built-in may inherit another one
+        if not isinstance(parent, str) or parent not in builtins or parent in seen:
             raise ConfigError(
                 f"{path}: inherit must name a built-in machine "
                 f"({', '.join(builtins)}), got {parent!r}"
             )
-        data = _merge(load_toml(builtins[parent]), data)
+        seen.add(parent)
+        base = load_toml(builtins[parent])
+        parent = base.pop("inherit", None)
+        # a number the file changes loses the built-in's provenance label (the label
+        # described the built-in's value), unless the file labels it itself
+        own = set(_dotted_keys(data)) - set(data.get("provenance") or {})
+        if isinstance(base.get("provenance"), dict):
+            base["provenance"] = {
+                k: v for k, v in base["provenance"].items() if k not in own
+            }
+        data = _merge(base, data)
+    prov = data.get("provenance")
+    if prov is not None:
+        if not isinstance(prov, dict) or not all(
+            isinstance(v, str) for v in prov.values()
+        ):
+            raise ConfigError(
+                f"{path}: [provenance] must map dotted keys to label strings"
+            )
+        data["provenance"] = sorted([str(k), v] for k, v in prov.items())
     try:
         machine = from_mapping(Machine, data)
     except ConfigError as exc:
@@ -516,9 +622,76 @@ def load_machine(source: str | Path | None = None) -> Machine:
     return _resolve_csv(machine, Path(path).parent)
 
 
-def describe_machine() -> list[dict]:
+#: Provenance labels start with one of these kinds.
+PROVENANCE_KINDS = ("paper", "assumed", "derived", "target")
+
+
+def describe_machine(machine: Machine | None = None) -> list[dict]:
     """Return the documented parameter list of a machine file.
 
-    Each entry gives the key, unit, doc and source.
+    Parameters
+    ----------
+    machine : Machine, optional
+        Machine whose values and provenance to list (default: the built-in
+        ``seed-prototype``).
+
+    Returns
+    -------
+    list of dict
+        One entry per key: ``key``, ``unit``, ``doc``, ``value`` (the machine's),
+        ``provenance`` (the label of the machine file's ``[provenance]`` table: the
+        same text as there), ``default`` (the generic default of a file that omits
+        the key) and ``source`` (where that generic default comes from). The
+        alternative disturbance sets follow, under
+        ``alternative-disturbances.<name>.``.
     """
-    return describe(Machine)
+    from ..config import to_mapping
+
+    if machine is None:
+        machine = load_machine()
+    prov = dict(machine.provenance)
+    flat: dict = {}
+
+    def walk(obj: dict, prefix: str) -> None:
+        for k, v in obj.items():
+            key = f"{prefix}.{k}" if prefix else k
+            if isinstance(v, dict):
+                walk(v, key)
+            else:
+                flat[key] = v
+
+    mapping = to_mapping(machine)
+    alts = mapping.pop("alternative-disturbances", [])
+    mapping.pop("provenance", None)
+    walk(mapping, "")
+    rows = []
+    for r in describe(Machine):
+        if r["key"] in ("provenance", "alternative-disturbances", "path"):
+            continue
+        rows.append(
+            {**r, "value": flat.get(r["key"]), "provenance": prov.get(r["key"], "")}
+        )
+    sub = {
+        r["key"][len("disturbances."):]: r
+        for r in describe(Disturbances, prefix="disturbances")
+    }
+    for alt in alts:
+        name = alt.get("name", "?")
+        aflat: dict = {}
+        for k, v in alt.items():
+            if isinstance(v, dict):
+                for kk, vv in v.items():
+                    aflat[f"{k}.{kk}"] = vv
+            else:
+                aflat[k] = v
+        for k, r in sub.items():
+            key = f"alternative-disturbances.{name}.{k}"
+            rows.append(
+                {
+                    **r,
+                    "key": key,
+                    "value": aflat.get(k),
+                    "provenance": prov.get(key, ""),
+                }
+            )
+    return rows

@@ -17,19 +17,24 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from dataclasses import field as _dc_field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from ..config import from_mapping, load_toml, param
 from ..errors import ConfigError
+from ._edge import tool_table_from_trace
 from ._tool import Field, Tool, read_waviness_csv
+
+if TYPE_CHECKING:
+    pass
 
 __all__ = [
     "FacingToolpath",
     "LensletToolpath",
     "ToolpathSpec",
     "load_toolpath",
+    "builtin_toolpaths",
     "toolpath_from_mapping",
     "lenslet_chord",
     "lenslet_cut_fraction",
@@ -220,14 +225,18 @@ class FacingToolpath(_ConstantSpeedPath):
     """
 
     feed_per_rev: float = param(2e-6, unit="m", doc="radial feed per revolution",
-                                source="seed paper Table 2", low=0.0, low_open=True)
+                                source="seed paper Table 2", low=0.0, low_open=True,
+                                plausible=(1e-9, 1e-3))
     spindle_speed: float = param(250.0 / 60.0, unit="rev/s", doc="spindle speed",
                                  source="seed paper Table 2 (250 rpm)", low=0.0,
-                                 low_open=True)
-    r_start: float = param(5.5e-3, unit="m", doc="start radius", low=0.0)
-    r_end: float = param(4.5e-3, unit="m", doc="end radius", low=0.0)
+                                 low_open=True, plausible=(1e-3, 2000.0))
+    r_start: float = param(5.5e-3, unit="m", doc="start radius", low=0.0,
+                           plausible=(0.0, 1.0))
+    r_end: float = param(4.5e-3, unit="m", doc="end radius", low=0.0,
+                         plausible=(0.0, 1.0))
     depth_of_cut: float = param(5e-6, unit="m", doc="depth of cut below z = 0",
-                                source="seed paper Table 2", low=0.0)
+                                source="seed paper Table 2", low=0.0,
+                                plausible=(0.0, 1e-3))
     theta_start: float = param(0.0, unit="rad", doc="tool angle at t = 0")
 
     def __post_init__(self) -> None:
@@ -319,19 +328,23 @@ class LensletToolpath(_ConstantSpeedPath):
         Radial distance between rings, in m (rings step inward).
     """
 
-    frequency: float = param(100.0, unit="Hz", doc="sinusoid frequency",
-                             source="seed paper Table 2", low=0.0, low_open=True)
-    amplitude: float = param(10e-6, unit="m", doc="zero-to-peak tool amplitude",
-                             source="seed paper Table 2", low=0.0, low_open=True)
+    frequency: float = param(100.0, unit="Hz", doc="FTS sinusoid frequency",
+                             source="seed paper Table 2", low=0.0, low_open=True,
+                             plausible=(1e-2, 5e4))
+    amplitude: float = param(10e-6, unit="m", doc="FTS zero-to-peak amplitude",
+                             source="seed paper Table 2", low=0.0, low_open=True,
+                             plausible=(1e-9, 5e-3))
     depth_of_cut: float = param(5e-6, unit="m", doc="lenslet depth",
-                                source="seed paper Table 2", low=0.0, low_open=True)
+                                source="seed paper Table 2", low=0.0, low_open=True,
+                                plausible=(1e-9, 5e-3))
     surface_speed: float = param(42.3e-3, unit="m/s", doc="nominal surface speed",
                                  source="seed paper section 5.3 (cut length = width)",
-                                 low=0.0, low_open=True)
+                                 low=0.0, low_open=True, plausible=(1e-5, 100.0))
     ring_radius: float = param(10e-3, unit="m", doc="radius of the first ring",
-                               low=0.0, low_open=True)
+                               low=0.0, low_open=True, plausible=(1e-5, 1.0))
     ring_count: int = param(3, doc="number of rings", low=1)
-    ring_pitch: float = param(0.2e-3, unit="m", doc="radial ring pitch", low=0.0)
+    ring_pitch: float = param(0.2e-3, unit="m", doc="radial ring pitch", low=0.0,
+                              plausible=(0.0, 0.1))
 
     def __post_init__(self) -> None:
         lenslet_cut_fraction(self.amplitude, self.depth_of_cut)  # checks d <= 2 A
@@ -424,10 +437,10 @@ class ToolpathSpec:
 
     Parameters
     ----------
-    kind : {"facing", "lenslet"}
+    kind : {"facing", "lenslet", "surface", "nc"}
         Which toolpath.
-    path : FacingToolpath or LensletToolpath
-        The path definition.
+    path : FacingToolpath, LensletToolpath, DesignToolpath or BlockPath
+        The path definition (``"nc"``: an NC program's cutting blocks).
     tool : Tool
         The diamond tool.
     field : Field
@@ -436,16 +449,18 @@ class ToolpathSpec:
         Free text.
     """
 
-    kind: Literal["facing", "lenslet"]
-    path: FacingToolpath | LensletToolpath
+    kind: Literal["facing", "lenslet", "surface", "nc"]
+    path: Any
     tool: Tool = _dc_field(default_factory=Tool)
     field: Field = _dc_field(default_factory=Field)
     description: str = ""
 
     def __post_init__(self) -> None:
-        expected = {"facing": FacingToolpath, "lenslet": LensletToolpath}.get(self.kind)
+        expected = _path_types().get(self.kind)
         if expected is None:
-            raise ConfigError(f"kind must be 'facing' or 'lenslet', got {self.kind!r}")
+            raise ConfigError(
+                f"kind must be 'facing', 'lenslet', 'surface' or 'nc', got "
+                f"{self.kind!r}")
         if not isinstance(self.path, expected):
             raise ConfigError(
                 f"kind {self.kind!r} needs a {expected.__name__}, got "
@@ -454,7 +469,21 @@ class ToolpathSpec:
 
 
 _PATH_TYPES: dict[str, type] = {"facing": FacingToolpath, "lenslet": LensletToolpath}
-_ROOT_KEYS = ("kind", "description", "facing", "lenslet", "tool", "field")
+
+
+def _path_types() -> dict[str, type]:
+    """Path class of every toolpath kind (``surface`` and ``nc`` imported on use)."""
+    from ._design import DesignToolpath
+    from ._trajectory import BlockPath
+
+    return {**_PATH_TYPES, "surface": DesignToolpath, "nc": BlockPath}
+
+
+#: The tables each kind reads (a table of another kind is an error).
+_KIND_TABLES = {"facing": ("facing",), "lenslet": ("lenslet",),
+                "surface": ("surface", "spiral")}
+_ROOT_KEYS = ("kind", "description", "facing", "lenslet", "surface", "spiral", "tool",
+              "field")
 _DEG_KEYS = ("rake-angle", "clearance-angle", "arc-half-angle")
 
 
@@ -471,7 +500,10 @@ def _pop_alias(table: dict[str, Any], key: str, alias: str, scale: float,
 
 
 def toolpath_from_mapping(data: Mapping[str, Any], *,
-                          base_dir: str | Path | None = None) -> ToolpathSpec:
+                          base_dir: str | Path | None = None,
+                          nose_radius: float | None = None,
+                          nc_overrides: Mapping[str, Any] | None = None
+                          ) -> ToolpathSpec:
     """Build a :class:`ToolpathSpec` from a parsed TOML mapping.
 
     Parameters
@@ -480,9 +512,18 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
         The TOML document (kebab-case keys). Boundary aliases: ``spindle-speed-rpm``
         (rpm) for ``facing.spindle-speed`` (rev/s); ``<angle>-deg`` (degree) for the
         tool's ``rake-angle``, ``clearance-angle`` and ``arc-half-angle`` (rad);
-        ``tool.edge-waviness`` names a CSV file (see :func:`read_waviness_csv`).
+        ``tool.edge-waviness`` names a CSV file (see :func:`read_waviness_csv`);
+        ``tool.edge-trace`` names a measured edge trace that gives the nose radius,
+        arc and waviness (see :func:`~servosurf.toolpath.tool_table_from_trace`
+        for its ``edge-*`` keys, e.g. ``edge-compensated = true``).
     base_dir : str or Path, optional
-        Directory against which a relative ``edge-waviness`` path is resolved.
+        Directory against which a relative ``edge-waviness`` path (and an NC
+        program) is resolved.
+    nose_radius : float, optional
+        Tool nose radius in m replacing the file's (``--tool-radius``).
+    nc_overrides : Mapping, optional
+        Kind ``"nc"``: :class:`~servosurf.toolpath.NCSettings` fields replacing the
+        file's (see :func:`~servosurf.toolpath.nc_spec_from_mapping`).
 
     Returns
     -------
@@ -494,6 +535,13 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
     ConfigError
         On unknown keys (with suggestions), a missing or wrong ``kind``, bad values.
     """
+    kind = data.get("kind")
+    if kind == "nc":
+        from ._trajectory import nc_spec_from_mapping
+
+        return nc_spec_from_mapping(
+            data, base_dir=base_dir, overrides=nc_overrides, nose_radius=nose_radius,
+            tool_from_table=lambda tab: _tool_from_table(tab, base_dir))
     for key in data:
         if key not in _ROOT_KEYS:
             sugg = difflib.get_close_matches(str(key), _ROOT_KEYS, n=1)
@@ -501,16 +549,39 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
             raise ConfigError(
                 f"unknown key {key!r}.{hint} Allowed keys here: {', '.join(_ROOT_KEYS)}"
             )
-    kind = data.get("kind")
-    if kind not in _PATH_TYPES:
-        raise ConfigError(f"kind must be 'facing' or 'lenslet', got {kind!r}")
-    other = "lenslet" if kind == "facing" else "facing"
-    if other in data:
-        raise ConfigError(f"[{other}] table given but kind = {kind!r}")
+    if kind not in _KIND_TABLES:
+        raise ConfigError(
+            f"kind must be 'facing', 'lenslet', 'surface' or 'nc', got {kind!r}")
+    for other, tables in _KIND_TABLES.items():
+        for t in tables:
+            if other != kind and t not in _KIND_TABLES[kind] and t in data:
+                raise ConfigError(f"[{t}] table given but kind = {kind!r}")
     path_tab = dict(data.get(kind, {}))
     if kind == "facing":
         _pop_alias(path_tab, "spindle-speed", "spindle-speed-rpm", 1.0 / 60.0, kind)
     tool_tab = dict(data.get("tool", {}))
+    if nose_radius is not None:
+        tool_tab.pop("nose_radius", None)
+        tool_tab["nose-radius"] = float(nose_radius)
+    tool = _tool_from_table(tool_tab, base_dir)
+    if kind == "surface":
+        from ._design import design_toolpath_from_mapping
+
+        path = design_toolpath_from_mapping(data.get("surface", {}),
+                                            data.get("spiral", {}), tool)
+    else:
+        path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
+    fld = from_mapping(Field, dict(data.get("field", {})), prefix="field")
+    desc = data.get("description", "")
+    if not isinstance(desc, str):
+        raise ConfigError(f"description: expected str, got {type(desc).__name__}")
+    return ToolpathSpec(kind=kind, path=path, tool=tool, field=fld, description=desc)
+
+
+def _tool_from_table(tool_tab: dict[str, Any], base_dir: str | Path | None) -> Tool:
+    """The :class:`Tool` of a ``[tool]`` table, with the degree, CSV and measured
+    edge-trace aliases."""
+    tool_tab, _ = tool_table_from_trace(dict(tool_tab), base_dir=base_dir)
     for key in _DEG_KEYS:
         _pop_alias(tool_tab, key, key + "-deg", math.pi / 180.0, "tool")
     if "waviness-angle-deg" in tool_tab:
@@ -535,23 +606,37 @@ def toolpath_from_mapping(data: Mapping[str, Any], *,
         ang, dev = read_waviness_csv(p)
         tool_tab["waviness-angle"] = list(ang)
         tool_tab["waviness-deviation"] = list(dev)
-    path = from_mapping(_PATH_TYPES[kind], path_tab, prefix=kind)
-    tool = from_mapping(Tool, tool_tab, prefix="tool")
-    fld = from_mapping(Field, dict(data.get("field", {})), prefix="field")
-    desc = data.get("description", "")
-    if not isinstance(desc, str):
-        raise ConfigError(f"description: expected str, got {type(desc).__name__}")
-    return ToolpathSpec(kind=kind, path=path, tool=tool, field=fld, description=desc)
+    return from_mapping(Tool, tool_tab, prefix="tool")
 
 
-def load_toolpath(path: str | Path) -> ToolpathSpec:
-    """Read a toolpath TOML file (``toolpaths/*.toml``).
+def builtin_toolpaths() -> dict[str, Path]:
+    """Return ``{name: path}`` of the toolpath files shipped with servosurf.
+
+    The names work wherever a toolpath path does (``load_toolpath("lenslet_5um")``,
+    ``servosurf simulate lenslet_5um``); ``servosurf toolpaths`` lists them.
+    """
+    from .._builtins import builtin_files
+
+    return builtin_files("toolpath")
+
+
+def load_toolpath(path: str | Path, *, nose_radius: float | None = None,
+                  nc_overrides: Mapping[str, Any] | None = None) -> ToolpathSpec:
+    """Read a toolpath TOML file (``toolpaths/*.toml``) or a built-in by name.
 
     Parameters
     ----------
     path : str or Path
-        The TOML file: ``kind = "facing" | "lenslet"``, a ``[facing]`` or
-        ``[lenslet]`` table, ``[tool]`` and ``[field]``.
+        The TOML file: ``kind = "facing" | "lenslet" | "surface" | "nc"``, a
+        ``[facing]``, ``[lenslet]`` or ``[nc]`` table or the ``[surface]`` and
+        ``[spiral]`` tables of a design surface
+        (:func:`~servosurf.toolpath.design_toolpath_from_mapping`), ``[tool]`` and
+        ``[field]``; or the name of a built-in toolpath (see
+        :func:`builtin_toolpaths`), e.g. ``"lenslet_5um"``.
+    nose_radius : float, optional
+        Tool nose radius in m replacing the file's.
+    nc_overrides : Mapping, optional
+        Kind ``"nc"``: settings replacing the file's ``[nc]`` values.
 
     Returns
     -------
@@ -563,5 +648,8 @@ def load_toolpath(path: str | Path) -> ToolpathSpec:
     ConfigError
         If the file is missing, not TOML, or has unknown keys or bad values.
     """
-    p = Path(path)
-    return toolpath_from_mapping(load_toml(p), base_dir=p.parent)
+    from .._builtins import resolve_file
+
+    p = resolve_file(path, kind="toolpath")
+    return toolpath_from_mapping(load_toml(p), base_dir=p.parent,
+                                 nose_radius=nose_radius, nc_overrides=nc_overrides)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -203,14 +204,76 @@ def _ranges_to_index(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
 
 
 def _resolve(spec, tool):
+    from ._design import DesignToolpath
+    from ._trajectory import BlockPath
+
     if isinstance(spec, ToolpathSpec):
         return spec.path, (spec.tool if tool is None else tool)
-    if isinstance(spec, FacingToolpath | LensletToolpath):
+    if isinstance(spec, FacingToolpath | LensletToolpath | BlockPath | DesignToolpath):
         return spec, tool
     raise ConfigError(
-        f"spec must be a ToolpathSpec, FacingToolpath or LensletToolpath, got "
-        f"{type(spec).__name__}"
+        f"spec must be a ToolpathSpec, FacingToolpath, LensletToolpath, BlockPath or "
+        f"DesignToolpath, got {type(spec).__name__}"
     )
+
+
+def _intersect(starts, stops, lo, hi):
+    """Intersection of two sorted lists of disjoint half-open index ranges."""
+    out_s, out_e = [], []
+    i = j = 0
+    while i < starts.size and j < lo.size:
+        a = max(starts[i], lo[j])
+        b = min(stops[i], hi[j])
+        if b > a:
+            out_s.append(a)
+            out_e.append(b)
+        if stops[i] < hi[j]:
+            i += 1
+        else:
+            j += 1
+    return (np.asarray(out_s, dtype=np.int64), np.asarray(out_e, dtype=np.int64))
+
+
+def _merge(starts, stops):
+    """Sorted, disjoint union of half-open index ranges."""
+    if starts.size < 2:
+        return starts, stops
+    order = np.argsort(starts, kind="stable")
+    starts, stops = starts[order], stops[order]
+    out_s, out_e = [int(starts[0])], [int(stops[0])]
+    for a, b in zip(starts[1:].tolist(), stops[1:].tolist(), strict=True):
+        if a <= out_e[-1]:
+            out_e[-1] = max(out_e[-1], b)
+        else:
+            out_s.append(a)
+            out_e.append(b)
+    return np.asarray(out_s, dtype=np.int64), np.asarray(out_e, dtype=np.int64)
+
+
+def _cutting_ranges(path, fs, starts, stops):
+    """Keep only the samples inside the path's cutting spans (paths with links)."""
+    starts, stops = _merge(starts, stops)
+    spans = path.cutting_spans()
+    lo = np.ceil(spans[:, 0] * fs - 1e-9).astype(np.int64)
+    hi = np.floor(spans[:, 1] * fs + 1e-9).astype(np.int64) + 1
+    return _intersect(starts, stops, lo, hi)
+
+
+def _window_ranges_varying(path, fs, i0, i1, centre, lo, hi):
+    """Revolution windows of a path whose angular speed varies (``time_at_theta``)."""
+    two_pi = 2.0 * math.pi
+    a_lo = centre + lo
+    a_hi = centre + hi
+    th_lo, th_hi = (float(v) for v in path.theta_at(np.array([i0 / fs, i1 / fs])))
+    k0 = math.floor((th_lo - a_hi) / two_pi)
+    k1 = math.ceil((th_hi - a_lo) / two_pi)
+    ks = np.arange(k0, k1 + 1, dtype=np.float64)
+    starts = np.floor(path.time_at_theta(a_lo + two_pi * ks) * fs).astype(np.int64)
+    stops = np.ceil(path.time_at_theta(a_hi + two_pi * ks) * fs).astype(np.int64)
+    starts = np.clip(starts - 2, i0, i1 + 1)
+    stops = np.clip(stops + 3, i0, i1 + 1)
+    keep = stops > starts
+    return starts[keep], stops[keep]
 
 
 def _index_ranges(path, fs, t_window, field, tool, reach):
@@ -243,9 +306,15 @@ def _index_ranges(path, fs, t_window, field, tool, reach):
         return empty, empty
     i0 = max(0, math.floor(t0 * fs) - 1)
     i1 = min(n_total - 1, math.ceil(t1 * fs) + 1)
+    links = hasattr(path, "cutting_spans")  # NC paths: links are not sampled
     if window is None:
-        return np.array([i0], dtype=np.int64), np.array([i1 + 1], dtype=np.int64)
+        starts = np.array([i0], dtype=np.int64)
+        stops = np.array([i1 + 1], dtype=np.int64)
+        return _cutting_ranges(path, fs, starts, stops) if links else (starts, stops)
     centre, lo, hi = window
+    if hasattr(path, "time_at_theta"):  # angular speed not constant
+        starts, stops = _window_ranges_varying(path, fs, i0, i1, centre, lo, hi)
+        return _cutting_ranges(path, fs, starts, stops) if links else (starts, stops)
     w = path.angular_speed
     margin = 2.0 * w / fs
     a_lo = centre + lo - margin
@@ -264,7 +333,7 @@ def _index_ranges(path, fs, t_window, field, tool, reach):
     return starts[keep], stops[keep]
 
 
-def count_samples(spec: ToolpathSpec | FacingToolpath | LensletToolpath, *,
+def count_samples(spec: ToolpathSpec | FacingToolpath | LensletToolpath | Any, *,
                   fs: float = FS_DEFAULT, t_window: tuple[float, float] | None = None,
                   field: Field | None = None, tool: Tool | None = None,
                   reach: float | None = None) -> int:
@@ -286,7 +355,7 @@ def count_samples(spec: ToolpathSpec | FacingToolpath | LensletToolpath, *,
     return int((stops - starts).sum())
 
 
-def sample(spec: ToolpathSpec | FacingToolpath | LensletToolpath, *,
+def sample(spec: ToolpathSpec | FacingToolpath | LensletToolpath | Any, *,
            fs: float = FS_DEFAULT, t_window: tuple[float, float] | None = None,
            field: Field | None = None, tool: Tool | None = None,
            reach: float | None = None, max_samples: int = MAX_SAMPLES_DEFAULT,
@@ -295,8 +364,10 @@ def sample(spec: ToolpathSpec | FacingToolpath | LensletToolpath, *,
 
     Parameters
     ----------
-    spec : ToolpathSpec, FacingToolpath or LensletToolpath
-        What to sample.
+    spec : ToolpathSpec, FacingToolpath, LensletToolpath or BlockPath
+        What to sample. A :class:`~servosurf.toolpath.BlockPath` (NC program) is
+        sampled only inside its cutting runs (links are left out) and its field
+        windows follow its varying angular speed.
     fs : float, default: 199.6e3
         Sampling rate, in Hz (the seed paper's controller rate).
     t_window : tuple of float, optional
@@ -342,9 +413,9 @@ def sample(spec: ToolpathSpec | FacingToolpath | LensletToolpath, *,
     n = int((stops - starts).sum())
     if n > max_samples:
         raise ConfigError(
-            f"sampling would give {n} samples (> max_samples = {max_samples}); pass "
-            "field= or t_window= to sample only what a field needs, use a smaller "
-            "reach, or raise max_samples"
+            f"sampling would give {n} samples, more than {max_samples}: use a "
+            "smaller field (field.nx, field.ny) or a shorter toolpath (Python: pass "
+            "field= or t_window=, or raise max_samples)"
         )
     if starts.size > 1 and np.any(starts[1:] < stops[:-1]):  # overlapping windows
         idx = np.unique(_ranges_to_index(starts, stops))

@@ -22,6 +22,10 @@ class ToolpathWarning(UserWarning):
 #: Number of points of the waviness table, uniform in s = sin(phi) (see Tool).
 WAVINESS_TABLE_SIZE = 4097
 
+#: Largest accepted cutting-edge radius, in m (1 um: a worn diamond is below 0.2 um;
+#: larger values are unit slips).
+EDGE_RADIUS_MAX = 1e-6
+
 
 @dataclass(frozen=True)
 class Tool:
@@ -42,6 +46,11 @@ class Tool:
     arc_half_angle : float, default: radians(60)
         Half-angle phi_max of the edge arc about the tool axis, in rad. The edge
         exists for |r_p - r| <= R sin(phi_max).
+    edge_radius : float, default: 20e-9
+        Cutting-edge (hone) radius r_n of the diamond, in m. It sets the scale of the
+        material parts of the forward model (minimum chip thickness
+        ``h_min = ratio * r_n``, side-flow ridges, elastic recovery; see
+        :class:`servosurf.cutting.Material`); the envelope sweep does not use it.
     waviness_angle : tuple of float, default: ()
         Contact angles phi of the edge-waviness profile, in rad, strictly increasing
         (phi = asin((r_p - r) / R), positive outward).
@@ -58,7 +67,8 @@ class Tool:
     """
 
     nose_radius: float = param(0.5e-3, unit="m", doc="nose radius R",
-                               source="seed paper Table 2", low=0.0, low_open=True)
+                               source="seed paper Table 2", low=0.0, low_open=True,
+                               plausible=(1e-7, 0.05))
     rake_angle: float = param(0.0, unit="rad", doc="rake angle",
                               source="seed paper Table 2 (0 degree)",
                               low=-math.pi / 2, high=math.pi / 2)
@@ -69,12 +79,27 @@ class Tool:
     arc_half_angle: float = param(math.radians(60.0), unit="rad",
                                   doc="half-angle phi_max of the edge arc",
                                   low=0.0, high=math.pi / 2, low_open=True)
+    edge_radius: float = param(
+        20e-9, unit="m", doc="cutting-edge (hone) radius r_n",
+        source="sharp single-crystal diamond: 5-50 nm (Ikawa et al., CIRP Ann. 40 "
+               "(1991) 587: a few nm; conventional polishing limit 25-45 nm, Semba et "
+               "al., Trans. JSME 88 (907) (2022)); used by the material parts only",
+        low=0.0, low_open=True)
     waviness_angle: tuple[float, ...] = param(
         default_factory=tuple, unit="rad", doc="contact angles of the waviness profile")
     waviness_deviation: tuple[float, ...] = param(
         default_factory=tuple, unit="m", doc="edge radius deviation (outward +)")
 
     def __post_init__(self) -> None:
+        r_n = self.edge_radius
+        if not (isinstance(r_n, int | float) and math.isfinite(r_n) and r_n > 0):
+            raise ConfigError(f"tool.edge-radius must be > 0 m, got {r_n!r}")
+        if r_n > EDGE_RADIUS_MAX:
+            raise ConfigError(
+                f"tool.edge-radius must be <= {EDGE_RADIUS_MAX:g} m (a diamond cutting "
+                f"edge is 5-100 nm), got {r_n!r} m; was it meant in nm "
+                f"({r_n * 1e-9:g} m)?"
+            )
         a = tuple(float(v) for v in self.waviness_angle)
         d = tuple(float(v) for v in self.waviness_deviation)
         object.__setattr__(self, "waviness_angle", a)
@@ -241,13 +266,15 @@ class Field:
 
     pitch_x: float = param(0.55e-6, unit="m", doc="grid pitch along x (columns)",
                            source="20X objective, 640 px over 0.352 mm",
-                           low=0.0, low_open=True)
+                           low=0.0, low_open=True, plausible=(1e-9, 1e-3))
     pitch_y: float = param(0.55e-6, unit="m", doc="grid pitch along y (rows)",
-                           low=0.0, low_open=True)
+                           low=0.0, low_open=True, plausible=(1e-9, 1e-3))
     nx: int = param(640, doc="number of columns", low=1)
     ny: int = param(480, doc="number of rows", low=1)
-    center_x: float = param(5e-3, unit="m", doc="x of the field centre")
-    center_y: float = param(0.0, unit="m", doc="y of the field centre")
+    center_x: float = param(5e-3, unit="m", doc="x of the field centre",
+                            plausible=(-1.0, 1.0))
+    center_y: float = param(0.0, unit="m", doc="y of the field centre",
+                            plausible=(-1.0, 1.0))
 
     def __post_init__(self) -> None:
         for name in ("nx", "ny"):

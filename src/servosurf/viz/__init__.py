@@ -14,8 +14,12 @@ _LAZY = {
     "plot_power_shares": "._servo_plots", "plot_loop_bode": "._servo_plots",
     "plot_map": "._surface_plots", "plot_profile_with_form_error": "._surface_plots",
     "plot_spectrum": "._surface_plots", "plot_filtered_map": "._surface_plots",
+    "plot_form_error": "._form_plots", "plot_design_feed": "._form_plots",
     "render_surface": "._render", "RenderFallbackWarning": "._render",
     "surface_to_mesh": "._mesh", "write_mesh": "._mesh",
+    "plot_nc_toolpath": "._nc_plots", "plot_band_map": "._nc_plots",
+    "plot_centre_profile": "._nc_plots", "plot_roughness_table": "._nc_plots",
+    "nc_figures": "._nc_plots",
 }
 
 __all__ = sorted(_LAZY)
