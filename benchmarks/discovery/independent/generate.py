@@ -60,11 +60,14 @@ ENR_DEFINITION = __doc__.split("ENR (effect-to-noise ratio), the key's")[1].spli
     '"""')[0].strip()
 
 
-def suite(n_cases: int, seed: int) -> list[dict]:
-    """Case specifications: ``{"effect", "enr"}`` in a seeded order."""
+def suite(n_cases: int, seed: int, enrs: tuple = ENRS) -> list[dict]:
+    """Case specifications: ``{"effect", "enr"}`` in a seeded order.
+
+    ``enrs`` are the target ENRs of every catalogue-like effect (one case each).
+    """
     full = []
     for name in E.CATALOGUE_LIKE:
-        for enr in ENRS:
+        for enr in enrs:
             full.append({"effect": name, "enr": enr})
     for i, name in enumerate(E.OUT_OF_CATALOGUE):
         full.append({"effect": name, "enr": OOC_ENRS[i % 2]})
@@ -294,11 +297,12 @@ def _work(args):
 
 
 def generate(out: Path, *, seed: int, n_cases: int, jobs: int = 1,
-             chip_force: str = "continuous", progress=print) -> dict:
+             chip_force: str = "continuous", enrs: tuple = ENRS,
+             progress=print) -> dict:
     """Generate the suite into ``out`` and seal its key; returns the (plain) key."""
     out = Path(out)
     (out / "cases").mkdir(parents=True, exist_ok=True)
-    specs = suite(n_cases, seed)
+    specs = suite(n_cases, seed, enrs)
     rng = np.random.default_rng(seed + 17)
     numbers = rng.permutation(len(specs)) + 1
     hold = chip_force == "held"
@@ -330,6 +334,18 @@ def generate(out: Path, *, seed: int, n_cases: int, jobs: int = 1,
     return key
 
 
+def _enr_list(text: str) -> tuple:
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--enrs {text!r}: expected comma-separated numbers") from None
+    if not vals or any(not (0.0 < v < 100.0) for v in vals):
+        raise argparse.ArgumentTypeError(
+            f"--enrs {text!r}: every ENR must be in (0, 100)")
+    return vals
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seed", type=int, default=0, help="suite seed")
@@ -341,10 +357,13 @@ def main(argv=None) -> int:
                     help="chip force following the tool inside the integrator "
                     "(physics, default) or held over each controller sample "
                     "(servosurf's loop model)")
+    ap.add_argument("--enrs", type=_enr_list, default=ENRS,
+                    help="target ENRs of the catalogue-like effects, comma "
+                    "separated (default 0.1,0.3; '0.3' gives a 24-case suite)")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     key = generate(a.out, seed=a.seed, n_cases=a.n_cases, jobs=a.jobs,
-                   chip_force=a.chip_force)
+                   chip_force=a.chip_force, enrs=a.enrs)
     bad = sum(1 for c in key["cases"] if "generation_error" in c)
     print(f"{len(key['cases'])} cases ({bad} not generated) in "
           f"{time.perf_counter() - t0:.0f} s -> {a.out}")
