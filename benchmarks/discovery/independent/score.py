@@ -199,6 +199,16 @@ def classify(res: dict) -> dict:
             "label": label, "top": top}
 
 
+def _workpiece_kt() -> float:
+    """The workpiece file's specific thrust pressure (Pa), the cases' nominal k_t."""
+    import tomllib
+
+    from independent.campaign import WORKPIECE
+
+    with open(WORKPIECE, "rb") as fh:
+        return float(tomllib.load(fh)["material"]["specific-thrust-pressure"])
+
+
 def score(out: Path) -> dict:
     """Metrics of a run (opens the key)."""
     from independent.generate import unseal
@@ -207,7 +217,7 @@ def score(out: Path) -> dict:
     res = {f.stem: json.loads(f.read_text())
            for f in sorted((out / "results").glob("case_*.json"))}
     key = unseal(out)
-    kt0 = 1.016e9
+    kt0 = _workpiece_kt()
     rows = []
     for k in key["cases"]:
         if "generation_error" in k:
@@ -237,14 +247,63 @@ def score(out: Path) -> dict:
             if row["top1"]:
                 row["param_error"] = param_error(c["top"]["effect"], k["comparable"],
                                                  c["top"]["parameters"], kt0)
+            hit = [e for e in c["physics"] if e["effect"] in k["expected"]]
+            if hit:  # the expected name anywhere in the list, not only on top
+                row["param_error_named"] = param_error(
+                    hit[0]["effect"], k["comparable"], hit[0]["parameters"], kt0)
         elif k["klass"] == "out-of-catalogue":
             row["flagged"] = c["verdict"] in ("unexplained", "partly-explained")
         else:
             only_noise = not c["physics"] and c["verdict"] != "consistent" and (
                 c["noise"])
             row["false_alarm"] = c["verdict"] != "consistent" and not only_noise
+        row["outcome"] = outcome(row)
         rows.append(row)
     return summarise(rows, key)
+
+
+#: Outcome columns of the per-effect table, in order.
+OUTCOMES = ("correct", "wrong", "unexplained", "noise-flag", "consistent", "error")
+
+
+def outcome(row: dict) -> str:
+    """One case's outcome for the per-effect table.
+
+    ``correct``: the largest-delta-BIC physics term is an expected name;
+    ``wrong``: a physics term is named but not an expected one (for
+    out-of-catalogue effects and nulls every physics name is wrong);
+    ``unexplained``: not consistent and nothing named; ``noise-flag``: only a
+    noise-model term; ``consistent``; ``error``: no diagnosis (error, timeout).
+    """
+    if row["verdict"] in ("error", "missing"):
+        return "error"
+    if row["verdict"] == "consistent":
+        return "consistent"
+    if row.get("top1"):
+        return "correct"
+    if row["named"]:
+        return "wrong"
+    return "noise-flag" if row["noise_flag"] else "unexplained"
+
+
+def per_effect(rows: list[dict]) -> list[dict]:
+    """Per generated effect: outcome counts, parameter errors, names given."""
+    out = []
+    for eff in sorted({r["effect"] for r in rows if "outcome" in r}):
+        rr = [r for r in rows if r.get("effect") == eff and "outcome" in r]
+        counts = {o: sum(1 for r in rr if r["outcome"] == o) for o in OUTCOMES}
+        pe = [r["param_error"] for r in rr if r.get("param_error") is not None]
+        pn = [r["param_error_named"] for r in rr
+              if r.get("param_error_named") is not None]
+        names: dict = {}
+        for r in rr:
+            for nm in r["named"]:
+                names[nm] = names.get(nm, 0) + 1
+        out.append({"effect": eff, "klass": rr[0]["klass"], "n": len(rr),
+                    **counts, "param_errors_top1": pe, "param_errors_named": pn,
+                    "names": names,
+                    "runtime_s": [r.get("runtime_s") for r in rr]})
+    return out
 
 
 def _rate(rows, pred):
@@ -287,6 +346,7 @@ def summarise(rows: list[dict], key: dict) -> dict:
         "n": {"catalogue_enr_ge_0.1": len(cat1), "out_of_catalogue": len(ooc),
               "null": len(nul)},
         "confusion": conf,
+        "per_effect": per_effect(rows),
         "chip_force": key.get("chip_force", "continuous"),
         "seed": key.get("seed"),
         "rows": rows,
@@ -326,6 +386,22 @@ def table(m: dict) -> str:
     lines.append(f"cases {m['cases']} (not generated {m['not_generated']}, "
                  f"diagnosis errors {m['errors']}), chip force {m['chip_force']}, "
                  f"seed {m['seed']}")
+    lines.append("")
+    lines.append("| generated effect | class | n | named correctly | named wrong | "
+                 "unexplained (nothing named) | noise flag only | consistent | "
+                 "no diagnosis | param. error (top-1; expected name anywhere) | "
+                 "physics named (count) |")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    order = {"catalogue": 0, "out-of-catalogue": 1, "null": 2}
+    for e in sorted(m["per_effect"], key=lambda e: (order.get(e["klass"], 3),
+                                                     e["effect"])):
+        pe = ", ".join(_pct(x) for x in e["param_errors_top1"]) or "-"
+        pn = ", ".join(_pct(x) for x in e["param_errors_named"]) or "-"
+        names = ", ".join(f"{k} ({v})" for k, v in sorted(
+            e["names"].items(), key=lambda kv: (-kv[1], kv[0])))
+        lines.append(f"| {e['effect']} | {e['klass']} | {e['n']} | "
+                     + " | ".join(str(e[o] or "") for o in OUTCOMES)
+                     + f" | {pe}; {pn} | {names} |")
     lines.append("")
     labels = sorted({lab for v in m["confusion"].values() for lab in v})
     lines.append("| generated effect | " + " | ".join(labels) + " |")
