@@ -432,3 +432,30 @@ def test_parameter_errors_of_curves_and_scalars(ind):
         "recalibration": []}
     c = S.classify(res)
     assert c["label"] == "loop-delay" and c["noise"]
+
+
+def test_outcome_of_a_case_and_the_per_effect_counts(ind):
+    S = ind.score
+
+    def row(effect, verdict, named, top1=None, noise=False, klass="catalogue"):
+        r = {"effect": effect, "klass": klass, "verdict": verdict, "named": named,
+             "noise_flag": noise, "runtime_s": 1.0}
+        if top1 is not None:
+            r["top1"] = top1
+        r["outcome"] = S.outcome(r)
+        return r
+
+    rows = [row("transport-delay", "explained", ["loop-delay"], top1=True),
+            row("transport-delay", "partly-explained", ["structural-mode"], top1=False),
+            row("transport-delay", "unexplained", [], top1=False),
+            row("transport-delay", "consistent", [], top1=False),
+            row("null-nominal", "partly-explained", [], noise=True, klass="null"),
+            row("null-nominal", "explained", ["thermal-drift"], klass="null"),
+            row("null-nominal", "error", [], klass="null")]
+    assert [r["outcome"] for r in rows] == ["correct", "wrong", "unexplained",
+                                            "consistent", "noise-flag", "wrong",
+                                            "error"]
+    pe = {e["effect"]: e for e in S.per_effect(rows)}
+    assert (pe["transport-delay"]["n"], pe["transport-delay"]["correct"],
+            pe["transport-delay"]["wrong"]) == (4, 1, 1)
+    assert pe["null-nominal"]["names"] == {"thermal-drift": 1}
