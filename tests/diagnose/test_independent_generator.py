@@ -432,6 +432,10 @@ def test_parameter_errors_of_curves_and_scalars(ind):
         "recalibration": []}
     c = S.classify(res)
     assert c["label"] == "loop-delay" and c["noise"]
+    # a null delta-BIC (written by the diagnosis for a merged term) ranks last
+    res["explanations"].insert(0, {"effect": "structural-mode", "delta_bic": None,
+                                   "parameters": {}})
+    assert S.classify(res)["label"] == "loop-delay"
 
 
 def test_outcome_of_a_case_and_the_per_effect_counts(ind):

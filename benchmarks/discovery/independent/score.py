@@ -183,12 +183,19 @@ def param_error(named: str, comp: dict, est: dict, kt0: float) -> float | None:
     return None
 
 
+def _bic(e: dict) -> float:
+    """An explanation's delta-BIC; a missing or non-finite one (the diagnosis has
+    written ``null``) ranks last."""
+    v = e.get("delta_bic")
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else -math.inf
+
+
 def classify(res: dict) -> dict:
     """Verdict, physics named (by delta-BIC), noise-model and recalibration terms."""
     if "error" in res:
         return {"verdict": "error", "physics": [], "noise": [], "recal": False,
                 "label": "error", "top": None}
-    ex = sorted(res.get("explanations", []), key=lambda e: -e.get("delta_bic", 0))
+    ex = sorted(res.get("explanations", []), key=lambda e: -_bic(e))
     phys = [e for e in ex if e["effect"] not in NOISE_MODEL]
     noise = [e for e in ex if e["effect"] in NOISE_MODEL]
     recal = bool(res.get("recalibration"))
