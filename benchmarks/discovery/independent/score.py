@@ -216,6 +216,36 @@ def _workpiece_kt() -> float:
         return float(tomllib.load(fh)["material"]["specific-thrust-pressure"])
 
 
+def _mismatched(res: dict, folder: Path) -> list[str]:
+    """Recordings with a mismatch, each with its rate when not the controller's
+    (``aircut.csv@99.8k``), strongest first."""
+    best: dict = {}
+    for m in res.get("mismatches", []):
+        rec = m.get("recording", "?").split(":")[0]
+        best[rec] = max(best.get(rec, 0.0), float(m.get("significance") or 0.0))
+    out = []
+    for rec in sorted(best, key=lambda k: -best[k]):
+        fs = _record_rate(folder / rec)
+        tag = "" if fs is None or abs(fs / FS - 1) < 1e-3 else f"@{fs / 1e3:.1f}k"
+        out.append(rec + tag)
+    return out
+
+
+def _record_rate(path: Path) -> float | None:
+    """Sampling rate (Hz) of a time record written by the generator, else None."""
+    try:
+        if path.suffix == ".npz":
+            with np.load(path) as z:
+                return float(z["fs_hz"]) if "fs_hz" in z.files else None
+        if path.suffix == ".csv" and path.name.split(".")[0] in (
+                "idle", "aircut", "aircut_b", "cut"):
+            t = np.loadtxt(path, delimiter=",", skiprows=1, max_rows=2, usecols=0)
+            return float(1.0 / (t[1] - t[0]))
+    except (OSError, ValueError, KeyError, IndexError):
+        return None
+    return None
+
+
 def score(out: Path) -> dict:
     """Metrics of a run (opens the key)."""
     from independent.generate import unseal
@@ -241,7 +271,8 @@ def score(out: Path) -> dict:
                "label": c["label"], "named": [e["effect"] for e in c["physics"]],
                "noise_flag": bool(c["noise"]), "recal": c["recal"],
                "low_freq_base": k["campaign"]["low_freq_base"],
-               "runtime_s": (r or {}).get("runtime_s")}
+               "runtime_s": (r or {}).get("runtime_s"),
+               "mismatched": _mismatched(r or {}, out / "cases" / k["case"])}
         bad = []
         for e in c["physics"] + c["noise"] + list((r or {}).get("recalibration", [])):
             b = out_of_bounds(e["effect"], e.get("parameters", {}))
@@ -419,8 +450,9 @@ def table(m: dict) -> str:
                      + " |")
     lines.append("")
     lines.append("| case | effect | form | ENR | verdict | named (by delta-BIC) | "
-                 "out of bounds |")
-    lines.append("|---|---|---|---|---|---|---|")
+                 "out of bounds | mismatched recordings (strongest first) | "
+                 "runtime (s) |")
+    lines.append("|---|---|---|---|---|---|---|---|---|")
     for r in sorted(m["rows"], key=lambda r: (r.get("klass", ""), r["effect"])):
         if "generation_error" in r:
             lines.append(f"| {r['case']} | {r['effect']} | | | not generated | "
@@ -429,7 +461,9 @@ def table(m: dict) -> str:
         ob = "; ".join(f"{b['effect']}: {', '.join(b['parameters'])}"
                        for b in r["out_of_bounds"])
         lines.append(f"| {r['case']} | {r['effect']} | {r['form']} | {r['enr']:g} | "
-                     f"{r['verdict']} | {', '.join(r['named'])} | {ob} |")
+                     f"{r['verdict']} | {', '.join(r['named'])} | {ob} | "
+                     f"{', '.join(r.get('mismatched', []))} | "
+                     f"{r['runtime_s'] or 0:.0f} |")
     return "\n".join(lines)
 
 
