@@ -352,10 +352,12 @@ def _rate(rows, pred):
 def summarise(rows: list[dict], key: dict) -> dict:
     """Aggregate metrics, the confusion table and per-case rows."""
     ok = [r for r in rows if "generation_error" not in r]
-    cat = [r for r in ok if r["klass"] == "catalogue"]
+    # rates over diagnosed cases only (a timeout or an error is no verdict)
+    done = [r for r in ok if r["verdict"] not in ("error", "missing")]
+    cat = [r for r in done if r["klass"] == "catalogue"]
     cat1 = [r for r in cat if r["enr"] >= 0.1]
-    ooc = [r for r in ok if r["klass"] == "out-of-catalogue"]
-    nul = [r for r in ok if r["klass"] == "null"]
+    ooc = [r for r in done if r["klass"] == "out-of-catalogue"]
+    nul = [r for r in done if r["klass"] == "null"]
     errs = [r["param_error"] for r in cat1 if r.get("param_error") is not None]
     conf: dict = {}
     for r in ok:
@@ -422,7 +424,8 @@ def table(m: dict) -> str:
         _pct(m["median_param_error_enr_ge_0.1"]), "<= 10 %")
     lines.append("")
     lines.append(f"cases {m['cases']} (not generated {m['not_generated']}, "
-                 f"diagnosis errors {m['errors']}), chip force {m['chip_force']}, "
+                 f"no diagnosis (timeout, error, not run) {m['errors']}; rates over "
+                 f"diagnosed cases), chip force {m['chip_force']}, "
                  f"seed {m['seed']}")
     lines.append("")
     lines.append("| generated effect | class | n | named correctly | named wrong | "
