@@ -482,7 +482,7 @@ def _warm_realisation() -> None:
     """Load the simulation kernels in a dask worker (one numba thread)."""
     import numba
 
-    from servosurf.simulation import realisation_study
+    from servosurf.report import realisation_study
 
     numba.set_num_threads(1)
     realisation_study(ROOT / "toolpaths" / "lenslet_5um.toml", seeds=[0],
@@ -496,7 +496,7 @@ def realisations_dask(quick: bool) -> dict:
     import distributed
 
     from servosurf._progress import set_quiet
-    from servosurf.simulation import realisation_study
+    from servosurf.report import realisation_study
 
     set_quiet(True)
     seeds = list(range(4 if quick else 8))

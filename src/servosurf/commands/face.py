@@ -98,7 +98,7 @@ def run(args) -> int:
     )
     from ..servo import ServoLoop, load_machine
     from ..toolpath import load_toolpath
-    from ..viz._surface_plots import plot_map
+    from ..viz import plot_map
     from ._common import (
         check_flags,
         dask_client,

@@ -14,7 +14,7 @@ import scipy as sp
 
 from .._validation import check_positive
 from ..errors import ConfigError
-from ..servo._machine import PSDModel, Spindle
+from ..servo import PSDModel, Spindle
 from ._psd import evaluate_psd
 
 __all__ = ["psd_series", "realise_spindle_axial", "SPINDLE_STREAM"]

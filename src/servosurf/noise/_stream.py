@@ -15,7 +15,7 @@ import numpy as np
 import scipy as sp
 
 from ..errors import ConfigError
-from ..servo._loop import ServoLoop
+from ..servo import ServoLoop
 from ._synthesis import synthesize
 
 __all__ = ["VibrationStream", "BLOCK"]

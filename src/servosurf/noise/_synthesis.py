@@ -9,8 +9,7 @@ import scipy as sp
 
 from .._validation import check_positive
 from ..errors import ConfigError
-from ..servo._loop import ServoLoop
-from ..servo._machine import Disturbances
+from ..servo import Disturbances, ServoLoop
 from ._psd import evaluate_psd, frequency_grid
 
 __all__ = [
@@ -272,9 +271,9 @@ def realise(
         tool[band] += path((inp, "tool")) * xb
         fol[band] += path((inp, "following_error")) * xb
         if bypass is not None and inp == "base":
-            from ..servo._loop import _double_pole
+            from ..servo import double_pole
 
-            hs = _double_pole(2j * np.pi * fb, loop.machine.sensor.corner)
+            hs = double_pole(2j * np.pi * fb, loop.machine.sensor.corner)
             bypass[band] = path(("sensor_noise", "tool")) * (-hs * xb)
     return Realisation(
         fs=fs,

@@ -47,10 +47,12 @@ from typing import Any
 
 import numpy as np
 
-from ..metrology._surface import Profile, Surface
+from ..metrology import Profile, Surface
+from ._analysis import SimulationAnalysis
 
 __all__ = [
     "analyse",
+    "SimulationAnalysis",
     "flat_face_ra",
     "FLAT_RA_DEFINITION",
     "lenslet_spectrum",
@@ -67,6 +69,8 @@ __all__ = [
 HIGH_PASS_CUTOFF = 1.0 / 80e3
 #: Lowest spatial frequency searched for spectral peaks, in 1/m.
 PEAK_FMIN = 80e3
+#: The constants the figures of an analysis name.
+FIGURE_CONSTANTS = {"highpass_cutoff_m": HIGH_PASS_CUTOFF, "peak_fmin_per_m": PEAK_FMIN}
 #: The paper's form reference: the air-cut amplitude 5.2 um for a nominal 5 um
 #: (section 5.3), as a ratio to the nominal amplitude.
 PAPER_AIR_CUT_RATIO = 5.2 / 5.0
@@ -282,7 +286,7 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         nominal_lenslet_profile,
         nominal_lenslet_surface,
     )
-    from ..servo._loop import ServoLoop
+    from ..servo import ServoLoop
 
     p = result.spec.path
     fld = result.spec.field
@@ -473,7 +477,7 @@ def _design(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
+def analyse(result, *, use_measured: bool = True) -> SimulationAnalysis:
     """Metrology summary of a :class:`~servosurf.simulation.SimulationResult`.
 
     Parameters
@@ -485,14 +489,20 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
 
     Returns
     -------
-    dict
-        SI values: ``form_error_max_m``, ``form_error_lag_m`` (lenslets),
-        ``form_error_pv_m``, ``form_error_rms_m`` and their ``_bfs`` variants
-        (design surfaces, against the design after piston and tilt),
-        ``spectrum_peaks_per_m`` (strongest first), ``ra_m``, ``sa_m``, ``sq_m``,
-        deviation statistics (``deviation_max_m``, ``deviation_overshoot_m``,
-        ``deviation_lag_s``, ``force_max_n``) and ``_plots`` data (not JSON).
+    SimulationAnalysis
+        ``.summary`` / ``.to_dict()``: SI values: ``form_error_max_m``,
+        ``form_error_lag_m`` (lenslets), ``form_error_pv_m``, ``form_error_rms_m``
+        and their ``_bfs`` variants (design surfaces, against the design after
+        piston and tilt), ``spectrum_peaks_per_m`` (strongest first), ``ra_m``,
+        ``sa_m``, ``sq_m``, deviation statistics (``deviation_max_m``,
+        ``deviation_overshoot_m``, ``deviation_lag_s``, ``force_max_n``);
+        ``.plot_data``: the arrays of the figures; ``.plot(folder)`` writes them.
+        An NC program's run is analysed by :func:`~servosurf.report.analyse_nc`.
     """
+    if result.spec.kind == "nc":
+        from ._nc import analyse_nc
+
+        return analyse_nc(result, use_measured=use_measured)
     surface = (
         result.measured
         if (use_measured and result.measured is not None)
@@ -501,16 +511,16 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
     out: dict[str, Any] = {
         "analysed_map": "measured" if surface is result.measured else "model"
     }
-    if result.spec.kind == "nc":
-        from ._nc import analyse_nc
-
-        return analyse_nc(result, use_measured=use_measured)
     out.update(_deviation_stats(result))
     if result.spec.kind == "lenslet":
-        return _lenslet(surface, result, out)
-    if result.spec.kind == "surface":
-        return _design(surface, result, out)
-    return _flat(surface, result, out)
+        out = _lenslet(surface, result, out)
+    elif result.spec.kind == "surface":
+        out = _design(surface, result, out)
+    else:
+        out = _flat(surface, result, out)
+    plots = out.pop("_plots")
+    return SimulationAnalysis(summary=out, result=result, plot_data=plots,
+                              constants=FIGURE_CONSTANTS)
 
 
 def profile_of(surface: Surface, axis: int) -> Profile:

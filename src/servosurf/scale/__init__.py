@@ -6,6 +6,8 @@ zarr is a dependency (the face's output array); dask (``distributed``, the
 
 from __future__ import annotations
 
+from .._defaults import reuse_freed_memory
+from .._tasks import map_tasks
 from ._face import (
     FaceResult,
     IndexNoise,
@@ -16,8 +18,6 @@ from ._face import (
     grid_attributes,
     simulate_face,
 )
-from ._memory import reuse_freed_memory
-from ._tasks import map_tasks
 from ._vibration import MemmapDeviation, write_vibration
 
 __all__ = [

@@ -20,6 +20,15 @@ _LAZY = {
     "plot_nc_toolpath": "._nc_plots", "plot_band_map": "._nc_plots",
     "plot_centre_profile": "._nc_plots", "plot_roughness_table": "._nc_plots",
     "nc_figures": "._nc_plots",
+    "plot_tool_edge": "._edge_plots",
+    "plot_profile_overlay": "._profile_plots", "plot_profile_table": "._profile_plots",
+    "plot_profile_spectra": "._profile_plots",
+    "simulation_figures": "._simulation_plots", "plot_highpass": "._simulation_plots",
+    "plot_analysis_spectrum": "._simulation_plots",
+    "plot_lenslet_profile": "._simulation_plots",
+    "plot_deviation": "._simulation_plots",
+    "plot_realisations": "._simulation_plots",
+    "plot_map_comparison": "._simulation_plots",
 }
 
 __all__ = sorted(_LAZY)
