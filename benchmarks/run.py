@@ -61,7 +61,7 @@ from servosurf.scale import (  # noqa: E402
     reuse_freed_memory,
     simulate_face,
 )
-from servosurf.toolpath._sweep import prepare_path, run_kernel  # noqa: E402
+from servosurf.toolpath import prepare_path, run_kernel  # noqa: E402
 
 CASES: dict[str, Callable[[bool], dict]] = {}
 
@@ -616,9 +616,10 @@ def realisation_whole_part(quick: bool) -> dict:
     import tempfile
 
     from servosurf.noise import VibrationStream, realise
-    from servosurf.servo import ServoLoop, load_machine
+    from servosurf.run import preset
+    from servosurf.servo import ServoLoop
 
-    loop = ServoLoop(load_machine().with_moving_mass(0.175).with_bandwidth(1448))
+    loop = ServoLoop(preset("paper-cutting").machine_model())
     n_fft = 2_000_000 if quick else 12_000_000  # 60 s of cutting at 199.6 kHz
     realise(loop, 4096, seed=0)  # warm-up
     t_fft = best_time(lambda: realise(loop, n_fft, seed=1), repeat=1)

@@ -55,15 +55,17 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--bandwidth",
         metavar="HZ",
         type=float,
-        default=1448.0,
-        help="crossover bandwidth in Hz for --toolpath (default 1448)",
+        default=None,
+        help="crossover bandwidth in Hz for --toolpath (default 1448, the paper's "
+        "cutting set-up: run preset paper-cutting)",
     )
     p.add_argument(
         "--mass",
         metavar="KG",
         type=float,
-        default=0.175,
-        help="moving mass in kg for --toolpath (default 0.175)",
+        default=None,
+        help="moving mass in kg for --toolpath (default 0.175, the paper's cutting "
+        "set-up: run preset paper-cutting)",
     )
     p.add_argument(
         "--seed", metavar="N", type=int, default=0, help="seed for --toolpath"
@@ -182,7 +184,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     from .._progress import stage
     from ..io import read_any
-    from ..report._profile_compare import as_profile_or_none
+    from ..report import as_profile_or_none
     from ._common import check_flags
 
     check_flags(args)  # --bandwidth, --mass: positive and plausible
@@ -191,16 +193,15 @@ def run(args) -> int:
         if args.simulated:
             simulated, _ = read_any(args.simulated)
         else:
+            from ..run import DEFAULT_PRESET, preset
             from ..simulation import simulate
 
-            res = simulate(
-                args.toolpath,
-                machine=args.machine,
-                workpiece=args.workpiece,
-                bandwidth=args.bandwidth,
-                mass=args.mass,
-                seed=args.seed,
-            )
+            # the paper's cutting set-up unless given; the machined map (no
+            # instrument model)
+            run_cfg = preset(DEFAULT_PRESET).replace(instrument=None).with_overrides(
+                machine=args.machine, workpiece=args.workpiece,
+                bandwidth=args.bandwidth, mass=args.mass, seed=args.seed)
+            res = simulate(args.toolpath, run_cfg)
             simulated = res.measured if res.measured is not None else res.surface
     profiles = (
         args.profile

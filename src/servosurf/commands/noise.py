@@ -64,11 +64,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     import numpy as np
 
+    from .. import viz as vz
     from .._progress import bar, stage
     from ..errors import ConfigError
     from ..noise import design_study, frequency_grid, synthesize
+    from ..run import preset
     from ..servo import ServoLoop, load_machine
-    from ..viz import _servo_plots as vz
     from ._common import (
         check_flags,
         dask_client,
@@ -81,7 +82,9 @@ def run(args) -> int:
     if args.disturbances:
         machine = machine.with_disturbances(args.disturbances)
     check_flags(args)  # --mass, --bandwidth(s): positive and plausible
-    masses = args.mass or [0.075, 0.175]
+    # default: the paper's two masses (bare carrier, and with the added mass)
+    masses = args.mass or [preset("paper-optimum-light").mass,
+                           preset("paper-cutting").mass]
     bw = args.bandwidth if args.bandwidth is not None else machine.controller.bandwidth
     if not (bw > 0 and np.isfinite(bw)):
         raise ConfigError(f"--bandwidth must be a positive frequency in Hz, got {bw!r}")

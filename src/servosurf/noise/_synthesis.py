@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy as sp
 
+from .._random import root
 from .._validation import check_positive
 from ..errors import ConfigError
 from ..servo import Disturbances, ServoLoop
@@ -232,7 +233,7 @@ def realise(
     fs = loop.fs
     fmin = fs / 4096 if fmin is None else check_positive(fmin, name="fmin")
     d = disturbances if disturbances is not None else loop.machine.disturbances
-    rng = np.random.default_rng(seed)
+    rng = root(seed)  # the root stream (servosurf._random)
     m = sp.fft.next_fast_len(int(n), real=True)
     f = np.fft.rfftfreq(m, 1.0 / fs)
     # the band fmin <= f < fs/2 is a contiguous slice of the rfft bins

@@ -12,6 +12,7 @@ _LAZY = {
     "plot_disturbance_frfs": "._servo_plots", "plot_cas": "._servo_plots",
     "plot_rms_vs_bandwidth": "._servo_plots", "plot_error_spectra": "._servo_plots",
     "plot_power_shares": "._servo_plots", "plot_loop_bode": "._servo_plots",
+    "plot_tool_frfs": "._servo_plots", "plot_frf_fit": "._servo_plots",
     "plot_map": "._surface_plots", "plot_profile_with_form_error": "._surface_plots",
     "plot_spectrum": "._surface_plots", "plot_filtered_map": "._surface_plots",
     "plot_form_error": "._form_plots", "plot_design_feed": "._form_plots",

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._random import figure_jitter
 from ._common import figure, save
 
 __all__ = [
@@ -268,7 +269,7 @@ def plot_realisations(seeds: np.ndarray, metrics: dict[str, np.ndarray],
         v = metrics[key] * scale
         v = v[np.isfinite(v)]
         # horizontal jitter of the markers only (a fixed seed: the same figure)
-        x = np.random.default_rng(0).uniform(-0.15, 0.15, v.size)
+        x = figure_jitter().uniform(-0.15, 0.15, v.size)
         ax.plot(x, v, "o", ms=4, alpha=0.7)
         ax.axhline(v.mean(), color="C3", lw=1)
         ax.axhspan(np.percentile(v, 5), np.percentile(v, 95), color="C3", alpha=0.12)
