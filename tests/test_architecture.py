@@ -30,6 +30,9 @@ ALLOWED = {
     ("private", "servosurf.commands.diagnose", "servosurf.diagnose._report"),
     # diagnose's report draws with viz's private figure helpers
     ("private", "servosurf.diagnose._report", "servosurf.viz._common"),
+    # diagnose limits BLAS threads through its own ctypes/threadpoolctl helper
+    # instead of servosurf._defaults.blas_threads
+    ("knob", "servosurf.diagnose._threads", ""),
 }
 
 
@@ -237,7 +240,8 @@ def test_library_never_imports_the_cli():
 def test_allow_list_is_not_stale():
     """Every allowed violation still exists (remove entries as they are fixed)."""
     found = violations()
-    stale = [v for v in ALLOWED if v[0] in ("up", "private") and v not in found]
+    found |= {("knob", m, "") for m, path in MODULES.items() if _knob_changes(path)}
+    stale = [v for v in ALLOWED if v not in found]
     assert stale == []
 
 
@@ -345,6 +349,44 @@ def test_compiled_kernels_use_the_shared_fastmath():
                 assert set(obj.targetoptions.get("fastmath", ())) == FASTMATH, (
                     m, name)
     assert seen > 10  # the kernels were found
+
+
+# ------------------------------------------------------------------ process knobs
+#: Calls that change a process knob for the rest of the process.
+_PERMANENT = {"set_quiet", "set_defaults", "reset_defaults", "reuse_freed_memory",
+              "set_num_threads", "mallopt", "threadpool_limits", "putenv"}
+#: Where knobs are defined or set by an entry point (the CLI's -q).
+_KNOB_OWNERS = {"servosurf._defaults", "servosurf._progress", "servosurf.cli",
+                "servosurf"}
+
+
+def _knob_changes(path: Path) -> list[int]:
+    """Lines that change a process knob outside a scoped ``with`` block's helper."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    lines = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            f = node.func
+            name = f.id if isinstance(f, ast.Name) else getattr(f, "attr", "")
+            if name in _PERMANENT:
+                lines.append(node.lineno)
+        elif isinstance(node, ast.Assign | ast.AugAssign):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            for t in targets:
+                if isinstance(t, ast.Subscript) and ast.unparse(t.value) in (
+                        "defaults", "os.environ", "_QUIET"):
+                    lines.append(node.lineno)
+    return lines
+
+
+def test_library_never_changes_a_process_knob_for_good():
+    """Library code uses ``defaults_override``/``numba_threads``/``malloc_reuse``
+    (restored on exit); only entry points set knobs for the process."""
+    bad = sorted((m, line) for m, path in MODULES.items()
+                 if m not in _KNOB_OWNERS and unit(m) != "commands"
+                 for line in _knob_changes(path)
+                 if ("knob", m, "") not in ALLOWED)
+    assert bad == []
 
 
 # ------------------------------------------------------------------ random streams
