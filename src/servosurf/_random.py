@@ -15,7 +15,10 @@ checks that no other module starts a generator):
   entropy pool (kept from earlier versions);
 * the block-seeded vibration stream of whole faces draws block ``b`` from
   ``default_rng([seed, b])`` (:func:`block`; the same samples whatever the
-  tiling);
+  tiling). numpy's ``SeedSequence`` drops trailing zero words, so block 0 is the
+  root stream: a face run draws only blocks and :func:`~servosurf.simulation.
+  simulate` only the root, so the two never meet in one run (kept so that seeded
+  faces do not move);
 * figures draw their jitter from :func:`figure_jitter` (seed 0: the same figure
   every time; no result depends on it).
 
