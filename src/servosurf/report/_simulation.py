@@ -277,7 +277,8 @@ def commanded_centre(result, x_m: float, y_m: float) -> float:
     return float(y[i])
 
 
-def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
+def _lenslet(surface: Surface, result, out: dict[str, Any]
+             ) -> tuple[dict[str, Any], dict[str, Any]]:
     from ..metrology import (
         find_peaks_spectrum,
         form_error_profile,
@@ -413,16 +414,17 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         roughness_definition="80 mm^-1 high-passed map inside the lenslet (Ra: centre "
         "profile along the cut)",
     )
-    out["_plots"] = {
+    plots = {
         "profile": (y, prof.z, fe),
         "highpass": hp,
         "form_error_map": err_map,
         "spectrum": (freq, psd, peaks),
     }
-    return out
+    return out, plots
 
 
-def _flat(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
+def _flat(surface: Surface, result, out: dict[str, Any]
+          ) -> tuple[dict[str, Any], dict[str, Any]]:
     from ..metrology import find_peaks_spectrum, high_pass, psd_1d
 
     lev = surface.level()
@@ -443,17 +445,17 @@ def _flat(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         roughness_definition=FLAT_RA_DEFINITION + "; sa_m, sq_m, sz_m: of the "
         "analysed map, unfiltered about the least-squares plane",
     )
-    out["_plots"] = {"highpass": hp, "spectrum": (freq, psd, peaks)}
-    return out
+    return out, {"highpass": hp, "spectrum": (freq, psd, peaks)}
 
 
-def _design(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
+def _design(surface: Surface, result, out: dict[str, Any]
+            ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Form error against the design; roughness and spectrum of the error map."""
     from ..metrology import form_error_against_design
 
     path = result.spec.path
     fe = form_error_against_design(surface, path, best_fit_sphere=True)
-    out = _flat(fe.error, result, out)
+    out, plots = _flat(fe.error, result, out)
     err = fe.error.z[np.isfinite(fe.error.z)]
     fld = result.spec.field
     xs = np.linspace(fld.bounds[0], fld.bounds[1], 3)
@@ -473,8 +475,8 @@ def _design(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         "and tilt), unfiltered about its least-squares plane; Ra mean over radial rows "
         "after a line fit",
     )
-    out["_plots"]["form_error"] = fe
-    return out
+    plots["form_error"] = fe
+    return out, plots
 
 
 def analyse(result, *, use_measured: bool = True) -> SimulationAnalysis:
@@ -513,12 +515,11 @@ def analyse(result, *, use_measured: bool = True) -> SimulationAnalysis:
     }
     out.update(_deviation_stats(result))
     if result.spec.kind == "lenslet":
-        out = _lenslet(surface, result, out)
+        out, plots = _lenslet(surface, result, out)
     elif result.spec.kind == "surface":
-        out = _design(surface, result, out)
+        out, plots = _design(surface, result, out)
     else:
-        out = _flat(surface, result, out)
-    plots = out.pop("_plots")
+        out, plots = _flat(surface, result, out)
     return SimulationAnalysis(summary=out, result=result, plot_data=plots,
                               constants=FIGURE_CONSTANTS)
 
