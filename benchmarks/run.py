@@ -483,10 +483,11 @@ def _warm_realisation() -> None:
     import numba
 
     from servosurf.report import realisation_study
+    from servosurf.run import RunConfig
 
     numba.set_num_threads(1)
-    realisation_study(ROOT / "toolpaths" / "lenslet_5um.toml", seeds=[0],
-                      instrument=None, n_threads=1)
+    realisation_study(ROOT / "toolpaths" / "lenslet_5um.toml",
+                      RunConfig(instrument=None, n_threads=1), seeds=[0])
 
 
 @case("realisations_dask")
@@ -497,21 +498,23 @@ def realisations_dask(quick: bool) -> dict:
 
     from servosurf._progress import set_quiet
     from servosurf.report import realisation_study
+    from servosurf.run import RunConfig
 
     set_quiet(True)
     seeds = list(range(4 if quick else 8))
     toolpath = ROOT / "toolpaths" / "lenslet_5um.toml"
-    kw = {"instrument": None, "n_threads": 1}
-    realisation_study(toolpath, seeds=[0], **kw)  # warm
+    # the machine's own set-up, no instrument model, one numba thread per task
+    run = RunConfig(instrument=None, n_threads=1)
+    realisation_study(toolpath, run, seeds=[0])  # warm
     t0 = time.perf_counter()
-    local = realisation_study(toolpath, seeds=seeds, **kw)
+    local = realisation_study(toolpath, run, seeds=seeds)
     t_local = time.perf_counter() - t0
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cl, \
             distributed.Client(cl) as client:
         client.run(_warm_realisation)
         t0 = time.perf_counter()
-        dres = realisation_study(toolpath, seeds=seeds, client=client, **kw)
+        dres = realisation_study(toolpath, run, seeds=seeds, client=client)
         t_dask = time.perf_counter() - t0
     same = all(np.array_equal(local.metrics[k], dres.metrics[k], equal_nan=True)
                for k in local.metrics)
