@@ -28,6 +28,9 @@ LAYERS = servosurf.LAYERS
 ALLOWED = {
     # the diagnose command draws the diagnosis's figures through a private module
     ("private", "servosurf.commands.diagnose", "servosurf.diagnose._report"),
+    # simulate writes manifest.toml with diagnose's private manifest writer (the
+    # effects merge should export simulation_manifest/DIAGNOSABLE_TOOLPATHS)
+    ("private", "servosurf.commands.simulate", "servosurf.diagnose._manifest"),
     # diagnose's report draws with viz's private figure helpers
     ("private", "servosurf.diagnose._report", "servosurf.viz._common"),
     # diagnose limits BLAS threads through its own ctypes/threadpoolctl helper

@@ -100,18 +100,19 @@ def test_paper_surface_rows_from_any_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     calls = []
 
-    def fake_simulate(path, **kw):  # stop after the toolpath was found
+    def fake_load(path, *a, **kw):  # stop after the toolpath was found
         calls.append(Path(path))
         raise _Found
 
     class _Found(Exception):
         pass
 
-    import servosurf.simulation
+    import servosurf.toolpath
+    from servosurf.servo import load_machine
 
-    monkeypatch.setattr(servosurf.simulation, "simulate", fake_simulate)
+    monkeypatch.setattr(servosurf.toolpath, "load_toolpath", fake_load)
     with pytest.raises(_Found):
-        _paper.surface_rows({})
+        _paper.surface_rows({"machine": load_machine()})
     assert calls[0].is_file() and calls[0].read_bytes() == LENS.read_bytes()
     from servosurf.toolpath import builtin_toolpaths
 

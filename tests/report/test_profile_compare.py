@@ -223,7 +223,7 @@ def test_cli_one_row_map_measured_no_traceback(tmp_path):
     write_surface(Surface(np.tile(s.z, (3, 1)), s.dx, s.dx, x0=s.x0),
                   tmp_path / "s.datx")
     proc = subprocess.run(
-        [sys.executable, "-m", "servosurf", "-q", "compare", str(tmp_path / "m.datx"),
+        [sys.executable, "-m", "servosurf", "compare", str(tmp_path / "m.datx"),
          "--simulated", str(tmp_path / "s.datx"), "--cutoff", "8e-5", "--out",
          str(tmp_path / "o")],
         capture_output=True, text=True, timeout=300,

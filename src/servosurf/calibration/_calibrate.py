@@ -123,9 +123,20 @@ PARAMETERS: tuple[tuple[str, Any, str], ...] = (
     ("sensor.target", "metrology-frame", "assumed: the sensor's 'ground flat "
      "surface' (2.2) on the metrology frame that carries the spindle (frame motion "
      "inside the loop); the paper does not say, fts-base is the alternative"),
+    ("axis.model", "fts", "paper: the tool's Z motion is the FTS loop (2, 3)"),
+    ("axis.bandwidth", 100.0, "assumed: natural frequency of a second-order Z "
+     "slide, used only with axis.model = 'second-order'"),
+    ("axis.damping", 0.7, "assumed: damping ratio of a second-order Z slide, used "
+     "only with axis.model = 'second-order'"),
+    ("axis.sample-rate", 20e3, "assumed: update rate of a second-order Z slide's "
+     "simulation, used only with axis.model = 'second-order'"),
     ("spindle.fmin", 0.05, "assumed: a flat-face field takes about a minute to cut"),
     ("spindle.axial-error.floor", 3.5e-11, "assumed: 1 nm RMS asynchronous axial "
      "error of an air-bearing spindle (Grejda 2002; ISO 230-7)"),
+    ("spindle.axial-error.level", 0.0, "assumed: no power-law part, the "
+     "asynchronous axial error is the white floor below its corner"),
+    ("spindle.axial-error.ref-frequency", 1000.0, "assumed: reference of the level"),
+    ("spindle.axial-error.slope", 0.0, "assumed: no power-law part"),
     ("spindle.axial-error.corner", 500.0, "assumed: roll-off of the asynchronous "
      "axial error"),
     ("spindle.axial-error.order", 2.0, "assumed: second-order roll-off"),

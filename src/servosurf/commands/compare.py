@@ -272,11 +272,9 @@ def _run_profiles(args, measured, simulated) -> int:
     out["files"] = {k: str(v) for k, v in files.items()}
     out["files"]["json"] = str(d / "compare.json")
     write_json(d / "compare.json", out)
-    from .._progress import is_quiet
-
     if args.json:
         print_json(out)
-    elif not is_quiet():
+    elif not args.quiet:
         _print_profiles(out)
     return 0
 

@@ -321,6 +321,9 @@ def run(args) -> int:
             from ..viz import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
+        manifest = _write_manifest(args, res, surf, files["map"], out)
+        if manifest is not None:
+            files["manifest"] = str(manifest)
         if edge is not None:
             files["tool_edge_png"] = str(edge.plot(out / "tool_edge.png"))
             summary["tool_edge"] = {
@@ -343,6 +346,44 @@ def run(args) -> int:
         print_json(summary)
     _print_result(args, tp, res, summary, out)
     return 0
+
+
+def _write_manifest(args, res, surf, map_file, out):
+    """``manifest.toml`` beside the map: ``servosurf diagnose`` on it is the null
+    test, and a measured map put in its place is diagnosed against this case.
+
+    Written for the toolpath kinds the diagnosis models, when the toolpath file
+    describes the run (no ``--tool``/``--tool-radius`` override); None otherwise.
+    """
+    from pathlib import Path
+
+    from .._builtins import resolve_file
+    from ..diagnose._manifest import DIAGNOSABLE_TOOLPATHS, simulation_manifest
+    from ..simulation import DEFAULT_PARTS
+
+    if res.spec.kind not in DIAGNOSABLE_TOOLPATHS or args.tool or (
+            args.tool_radius is not None):
+        return None
+    tp = Path(args.toolpath)
+    tp = tp.resolve() if tp.is_file() else resolve_file(args.toolpath,
+                                                         kind="toolpath")
+
+    def where(v):  # a file given on the command line, absolute; a built-in name
+        return None if v is None else (str(Path(v).resolve()) if Path(v).is_file()
+                                       else str(v))
+
+    st = res.settings
+    parts = tuple(st.get("parts", DEFAULT_PARTS))
+    note = "" if parts == tuple(DEFAULT_PARTS) else (
+        f"simulated with parts {', '.join(parts)}; the diagnosis models "
+        f"{', '.join(DEFAULT_PARTS)}")
+    text = simulation_manifest(
+        toolpath=str(tp), recording=Path(map_file).name, machine=where(args.machine),
+        bandwidth=st.get("bandwidth_hz"), moving_mass=st.get("moving_mass_kg"),
+        workpiece=where(args.workpiece), x0=surf.x0, y0=surf.y0, note=note)
+    path = out / "manifest.toml"
+    path.write_text(text)
+    return path
 
 
 def _print_result(args, tp, res, summary, out) -> None:

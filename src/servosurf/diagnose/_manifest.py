@@ -65,7 +65,19 @@ import numpy as np
 
 from ..errors import ConfigError
 
-__all__ = ["KINDS", "Manifest", "Recording", "load_manifest", "read_recording"]
+__all__ = [
+    "DIAGNOSABLE_TOOLPATHS",
+    "KINDS",
+    "Manifest",
+    "Recording",
+    "load_manifest",
+    "read_recording",
+    "simulation_manifest",
+]
+
+#: Toolpath kinds whose maps and profiles the diagnosis models (a design surface
+#: and an NC program are simulated, not yet diagnosed).
+DIAGNOSABLE_TOOLPATHS = ("lenslet", "facing")
 
 #: Recording kinds accepted in a manifest.
 KINDS = (
@@ -170,6 +182,19 @@ class Manifest:
     disturbances: str | None
     specific_force: float | None
     recordings: tuple[Recording, ...]
+
+
+def _toolpath_kind(path: Path) -> str:
+    """The ``kind`` of a toolpath file ("nc" for an NC program)."""
+    if path.suffix.lower() != ".toml":
+        return "nc"
+    import tomllib
+
+    try:
+        with open(path, "rb") as fh:
+            return str(tomllib.load(fh).get("kind"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"toolpath {path}: {exc}") from None
 
 
 def _suggest(key: str, known) -> str:
@@ -334,6 +359,15 @@ def load_manifest(path: str | Path) -> Manifest:
             raise ConfigError(f"{where}: recording {i + 1}: {rp}: no such file")
         if kind in ("cut", "surface", "profile") and toolpath is None:
             raise ConfigError(f"{where}: a {kind!r} recording needs case.toolpath")
+        if kind in ("cut", "surface", "profile"):
+            tk = _toolpath_kind(toolpath)
+            if tk not in DIAGNOSABLE_TOOLPATHS:
+                raise ConfigError(
+                    f"{where}: recording {i + 1}: a {kind!r} recording of a toolpath "
+                    f"of kind {tk!r} ({toolpath.name}) cannot be diagnosed yet: the "
+                    f"diagnosis models the toolpath kinds "
+                    f"{', '.join(DIAGNOSABLE_TOOLPATHS)} (servosurf simulate and "
+                    "compare handle every kind)")
         opts = {k: v for k, v in rec.items() if k not in ("path", "kind", "name")}
         name = str(rec.get("name", rp.name))
         out.append(
@@ -605,3 +639,78 @@ def read_recording(path: str | Path, kind: str) -> dict:
     if kind == "profile":
         return _read_profile(path)
     raise ConfigError(f"unknown recording kind {kind!r} (kinds: {', '.join(KINDS)})")
+
+
+def simulation_manifest(
+    *,
+    toolpath: str | Path,
+    recording: str,
+    kind: str = "surface",
+    machine: str | Path | None = None,
+    bandwidth: float | None = None,
+    moving_mass: float | None = None,
+    disturbances: str | None = None,
+    workpiece: str | Path | None = None,
+    x0: float | None = None,
+    y0: float | None = None,
+    note: str = "",
+) -> str:
+    """The manifest text of one simulated recording (``servosurf simulate`` writes it).
+
+    Diagnosing a simulation with the settings it was made with is the null test:
+    the verdict should be "consistent". Replacing the recording's ``path`` with a
+    measured map of the same cut diagnoses the real part.
+
+    Parameters
+    ----------
+    toolpath : str or Path
+        Toolpath TOML (absolute path or built-in name).
+    recording : str
+        The recording's file, relative to the manifest.
+    kind : str
+        Recording kind (see :data:`KINDS`).
+    machine : str or Path, optional
+        Built-in machine name or machine TOML (default: the built-in machine).
+    bandwidth : float, optional
+        Open-loop crossover in Hz.
+    moving_mass : float, optional
+        m1 + m2 in kg.
+    disturbances : str, optional
+        Disturbance calibration name.
+    workpiece : str or Path, optional
+        Built-in workpiece name or workpiece TOML.
+    x0, y0 : float, optional
+        Centre of the map's pixel (0, 0) in the workpiece frame, m.
+    note : str
+        A comment line written at the top.
+    """
+    if kind not in KINDS:
+        raise ConfigError(
+            f"recording kind {kind!r} unknown (kinds: {', '.join(KINDS)})")
+
+    def q(v) -> str:
+        return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+    lines = [
+        "# Diagnosis manifest of a simulated recording. `servosurf diagnose` on it is",
+        "# the null test (verdict: consistent); put a measured map of the same cut in",
+        "# the recording's path to diagnose a real part.",
+    ]
+    if note:
+        lines.append(f"# {note}")
+    lines += ["[case]", f"machine = {q(machine or 'seed-prototype')}",
+              f"toolpath = {q(toolpath)}"]
+    if bandwidth is not None:
+        lines.append(f"bandwidth = {float(bandwidth)!r}  # Hz, open-loop crossover")
+    if moving_mass is not None:
+        lines.append(f"moving-mass = {float(moving_mass)!r}  # kg, m1 + m2")
+    if disturbances is not None:
+        lines.append(f"disturbances = {q(disturbances)}")
+    if workpiece is not None:
+        lines.append(f"workpiece = {q(workpiece)}")
+    lines += ["", "[[recording]]", f"path = {q(recording)}", f"kind = {q(kind)}"]
+    if x0 is not None:
+        lines.append(f"x0 = {float(x0)!r}  # m, pixel (0, 0) in the workpiece frame")
+    if y0 is not None:
+        lines.append(f"y0 = {float(y0)!r}  # m")
+    return "\n".join(lines) + "\n"

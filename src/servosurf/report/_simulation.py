@@ -142,10 +142,11 @@ def lenslet_spectrum(
     profiles of the central half of its columns, from one cut-off inside its first
     row to one cut-off inside its last (where the high-pass has data on both sides),
     of the map high-passed at ``cutoff`` (m). Lenslets cut by the map's top or bottom
-    edge are left out; all profiles are cut to the shortest length so that their
-    PSDs share one frequency grid. ``blocks`` (the ``used`` list of an earlier call
-    on a map of the same field) reuses those pixel ranges, so that the spectra of
-    several realisations share their grid.
+    edge are left out (used only when the map holds no complete one); all profiles
+    are cut to the shortest length so that their PSDs share one frequency grid.
+    ``blocks`` (the ``used`` list of an earlier call on a map of the same field)
+    reuses those pixel ranges, so that the spectra of several realisations share
+    their grid.
 
     Returns
     -------
@@ -154,8 +155,9 @@ def lenslet_spectrum(
     psd : ndarray
         Mean one-sided PSD, m^3 (:func:`~servosurf.metrology.psd_1d`).
     used : list of dict
-        Per lenslet used: ``rows`` and ``cols`` (pixel ranges) and ``x_m`` (the
-        columns' x positions, m).
+        Per lenslet used: ``rows`` and ``cols`` (pixel ranges), ``x_m`` (the
+        columns' x positions, m) and ``partial`` (the lenslet is cut by the map's
+        edge).
     """
     from ..metrology import high_pass, psd_1d, segment_lenslets
 
@@ -168,26 +170,36 @@ def lenslet_spectrum(
         return freq, psd, list(blocks)
     edge = int(np.ceil(cutoff / surface.dy))
     ny = surface.shape[0]
+    lenses = segment_lenslets(surface)
     blocks = []
-    for lens in segment_lenslets(surface):
-        r0, c0, r1, c1 = lens["bbox"]
-        if r0 == 0 or r1 == ny:
-            continue
-        w = c1 - c0
-        cc0, cc1 = c0 + w // 4, c1 - w // 4
-        rr0, rr1 = r0 + edge, r1 - edge
-        if rr1 - rr0 < 32 or cc1 <= cc0:
-            continue
-        blocks.append((rr0, rr1, cc0, cc1))
+    # complete lenslets first; a field smaller than one lenslet along the cut
+    # (a quick test field) falls back to the lenslet parts it holds, marked
+    # ``partial`` in ``used``
+    for partial in (False, True):
+        for lens in lenses:
+            r0, c0, r1, c1 = lens["bbox"]
+            cut = r0 == 0 or r1 == ny
+            if cut and not partial:
+                continue
+            w = c1 - c0
+            cc0, cc1 = c0 + w // 4, c1 - w // 4
+            rr0, rr1 = r0 + (0 if r0 == 0 else edge), r1 - (0 if r1 == ny else edge)
+            if rr1 - rr0 < 32 or cc1 <= cc0:
+                continue
+            blocks.append((rr0, rr1, cc0, cc1, cut))
+        if blocks:
+            break
     if not blocks:
-        raise ValueError("no complete lenslet along the cutting direction in the map")
+        raise ValueError("no lenslet of 32 pixels or more along the cutting "
+                         "direction in the map")
     n = min(b[1] - b[0] for b in blocks)
     profiles, used = [], []
-    for rr0, rr1, cc0, cc1 in blocks:
+    for rr0, rr1, cc0, cc1, cut in blocks:
         mid = (rr0 + rr1) // 2
         s0 = mid - n // 2
         profiles.append(hp.z[s0 : s0 + n, cc0:cc1])
-        used.append({"rows": (s0, s0 + n), "cols": (cc0, cc1), "x_m": xs[cc0:cc1]})
+        used.append({"rows": (s0, s0 + n), "cols": (cc0, cc1), "x_m": xs[cc0:cc1],
+                     "partial": bool(cut)})
     freq, psd = psd_1d(np.concatenate(profiles, axis=1), surface.dy, axis=0)
     return freq, psd, used
 
@@ -408,6 +420,7 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]
         ],
         sampling_alias_bands=bands,
         spectrum_lenslets=len(used),
+        spectrum_partial_lenslets=any(u.get("partial", False) for u in used),
         ra_m=ra,
         sa_m=float(np.mean(np.abs(v - v.mean()))),
         sq_m=float(np.sqrt(np.mean((v - v.mean()) ** 2))),
