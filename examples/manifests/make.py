@@ -51,20 +51,43 @@ def _csv(path: Path, header: list[str], columns: list[np.ndarray]) -> None:
             w.writerow([repr(float(v)) for v in row])
 
 
-def write_all(folder: Path) -> list[Path]:
-    """Write every example recording into ``folder``; return the files."""
+#: The recordings make.py writes, by group.
+GROUPS = ("idle", "frf", "surface", "cut")
+
+
+def write_all(folder: Path, groups=GROUPS) -> list[Path]:
+    """Write the example recordings of ``groups`` into ``folder``; return the files.
+
+    Groups: ``idle`` (idle.npz), ``frf`` (the three FRF CSVs), ``surface``
+    (surface/ from servosurf simulate), ``cut`` (cut.csv, profile.npz and
+    profile.toml).
+    """
     folder.mkdir(parents=True, exist_ok=True)
     machine = load_machine().with_moving_mass(MASS).with_bandwidth(BANDWIDTH)
     loop = ServoLoop(machine)
     files = []
+    if "idle" in groups:  # following error, tool out of cut: 32 x 4096 samples
+        files += _idle(loop, folder)
+    if "frf" in groups:
+        files += _frfs(loop, folder)
+    if "surface" in groups:
+        files += _surface(folder)
+    if "cut" in groups:
+        files += _cut(loop, folder)
+    return files
 
-    # following error, tool out of cut: 32 records of 4096 samples
+
+def _idle(loop, folder):
+    files = []
     rec = realise(loop, 32 * 4096, seed=SEED)
     fe = np.asarray(rec.following, dtype=float)[: 32 * 4096].reshape(32, 4096)
     np.savez(folder / "idle.npz", following_error_m=fe, fs_hz=loop.fs)
     files.append(folder / "idle.npz")
+    return files
 
-    # frequency responses as a controller measures them
+
+def _frfs(loop, folder):  # frequency responses as a controller measures them
+    files = []
     f = np.geomspace(50.0, 40e3, 300)
     frf = loop.frf(f)
     for name, h in (
@@ -74,14 +97,18 @@ def write_all(folder: Path) -> list[Path]:
     ):
         _csv(folder / name, ["frequency_hz", "real", "imag"], [f, h.real, h.imag])
         files.append(folder / name)
+    return files
 
-    # the surface and its manifest, as servosurf simulate writes them
+
+def _surface(folder):  # the surface and its manifest, as servosurf simulate writes
     sim = folder / "surface"
     assert servosurf(["-q", "simulate", "lenslet_5um", "--seed", str(SEED),
                       "--no-render", "--out", str(sim), "--force"]) == 0
-    files += [sim / "surface.datx", sim / "manifest.toml"]
+    return [sim / "surface.datx", sim / "manifest.toml"]
 
-    # a cut record and a profile of one simulation
+
+def _cut(loop, folder):  # a cut record and a profile of one simulation
+    files = []
     res = simulate(builtin_toolpaths()["lenslet_5um"], bandwidth=BANDWIDTH,
                    mass=MASS, seed=SEED, instrument=None)
     n = int(round(0.02 * loop.fs))

@@ -90,3 +90,32 @@ def test_variance_excess_with_overlap_and_the_degenerate_case():
     assert variance_excess_logsf(
         1.1e4, 10_000, share=1.0, sigma_dof=math.inf, overlap=0
     ) == _chi2_logsf(1.1e4, 10_000)
+
+
+def test_expected_periodogram_is_the_fejer_sum_of_the_autocovariance():
+    """Closed form: an AR(1) series x_t = phi x_{t-1} + e_t has the PSD
+    ``2 s2 / fs / |1 - phi e^{-i w}|^2`` (one-sided) and the autocovariance
+    ``s2 phi^|tau| / (1 - phi^2)``; its expected rectangular-window periodogram
+    is the direct Fejer sum of that autocovariance. At phi = 0.9 the PSD falls
+    by 25 dB to the Nyquist frequency, where leakage lifts the bins by several
+    per cent over the PSD itself."""
+    from types import SimpleNamespace
+
+    from servosurf.diagnose._blocks import expected_periodogram
+
+    fs, n, phi, s2 = 1000.0, 256, 0.9, 1.0
+
+    def psd(p, f, output="fe"):
+        w = 2 * np.pi * np.asarray(f) / fs
+        return 2 * s2 / fs / np.abs(1 - phi * np.exp(-1j * w)) ** 2
+
+    case = SimpleNamespace(fs=fs, noise_psd=psd)
+    k = np.arange(1, n // 2 + 1)
+    freq = k * fs / n
+    got = expected_periodogram(case, None, freq, n, fs)
+    tau = np.arange(-(n - 1), n)
+    r = s2 * phi ** np.abs(tau) / (1 - phi**2)
+    ref = np.array([np.sum((n - np.abs(tau)) * r * np.cos(2 * np.pi * kk * tau / n))
+                    for kk in k]) * 2 / (fs * n)
+    np.testing.assert_allclose(got, ref, rtol=1e-6)
+    assert got[-1] / psd(None, freq[-1]) > 1.03  # leakage near Nyquist is real

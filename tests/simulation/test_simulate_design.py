@@ -42,6 +42,11 @@ def test_kinematic_simulation_is_the_sweep_and_meets_the_scallop(small_sphere):
     assert summary["form_error_rms_bfs_m"] <= summary["form_error_rms_m"] * (1 + 1e-9)
     assert summary["design_toolpath"]["design"] == {"type": "sphere",
                                                      "radius_m": -0.05}
+    # Ra of the form-error map (not of the sphere's sag): mean |e - plane|, at
+    # most its RMS, and at least half of it for scallops (a triangle wave: 0.87)
+    e = res.surface.z  # kinematic: the error is the scallop about the design
+    assert 0.5 * summary["sq_m"] <= summary["ra_m"] <= summary["sq_m"]
+    assert summary["ra_m"] < 0.1 * np.ptp(e)  # the sag would be the whole range
 
 
 def test_kinematic_simulation_on_a_steep_sphere(small_sphere):

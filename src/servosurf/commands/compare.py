@@ -275,7 +275,9 @@ def _run_profiles(args, measured, simulated) -> int:
     if args.json:
         print_json(out)
     elif not args.quiet:
-        _print_profiles(out)
+        from ._common import _final
+
+        _print_profiles(_final(out))  # the final folder's paths, not the pending one
     return 0
 
 

@@ -364,9 +364,9 @@ def _write_manifest(args, res, surf, map_file, out):
     if res.spec.kind not in DIAGNOSABLE_TOOLPATHS or args.tool or (
             args.tool_radius is not None):
         return None
-    tp = Path(args.toolpath)
-    tp = tp.resolve() if tp.is_file() else resolve_file(args.toolpath,
-                                                         kind="toolpath")
+    tp = Path(args.toolpath)  # a file given: its absolute path; a built-in: its name
+    tp = str(tp.resolve()) if tp.is_file() else resolve_file(
+        args.toolpath, kind="toolpath").stem
 
     def where(v):  # a file given on the command line, absolute; a built-in name
         return None if v is None else (str(Path(v).resolve()) if Path(v).is_file()
@@ -405,7 +405,7 @@ def _print_result(args, tp, res, summary, out) -> None:
         rows.append(("max form error", fmt_length(s["form_error_max_m"])
                      + (f" ({fmt_length(lag, 'um')} after the deepest point)"
                         if lag is not None else "")))
-    if s.get("form_error_rms_m") is not None:
+    if s.get("form_error_rms_m") is not None and s.get("form_error_pv_m") is None:
         rows.append(("form error RMS", fmt_length(s["form_error_rms_m"])))
     rough = [(k, s.get(f"{k.lower()}_m")) for k in ("Ra", "Sa", "Sq")]
     rough = [(k, v) for k, v in rough if v is not None]

@@ -436,8 +436,10 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]
     return out, plots
 
 
-def _flat(surface: Surface, result, out: dict[str, Any]
-          ) -> tuple[dict[str, Any], dict[str, Any]]:
+def _flat(surface: Surface, result, out: dict[str, Any],
+          ra_of: Surface | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Flat-face summary and figure data; ``ra_of``: the map whose Ra is reported
+    instead of the machined map's (a design surface's form-error map)."""
     from ..metrology import find_peaks_spectrum, high_pass, psd_1d
 
     lev = surface.level()
@@ -446,9 +448,9 @@ def _flat(surface: Surface, result, out: dict[str, Any]
     freq, psd = psd_1d(hp.z, surface.dy, axis=0)
     peaks = find_peaks_spectrum(freq, psd, n=5, fmin=PEAK_FMIN)
     out.update(
-        ra_m=flat_face_ra(result.surface),
+        ra_m=flat_face_ra(result.surface if ra_of is None else ra_of),
         ra_instrument_m=(flat_face_ra(result.measured)
-                         if result.measured is not None else None),
+                         if result.measured is not None and ra_of is None else None),
         sa_m=float(np.mean(np.abs(v - v.mean()))),
         sq_m=float(np.sqrt(np.mean((v - v.mean()) ** 2))),
         sz_m=float(v.max() - v.min()),
@@ -468,7 +470,7 @@ def _design(surface: Surface, result, out: dict[str, Any]
 
     path = result.spec.path
     fe = form_error_against_design(surface, path, best_fit_sphere=True)
-    out, plots = _flat(fe.error, result, out)
+    out, plots = _flat(fe.error, result, out, ra_of=fe.error)
     err = fe.error.z[np.isfinite(fe.error.z)]
     fld = result.spec.field
     xs = np.linspace(fld.bounds[0], fld.bounds[1], 3)
@@ -485,8 +487,8 @@ def _design(surface: Surface, result, out: dict[str, Any]
                              else None),
         design_toolpath=path.to_dict(),
         roughness_definition="of the form-error map (map minus design, after piston "
-        "and tilt), unfiltered about its least-squares plane; Ra mean over radial rows "
-        "after a line fit",
+        "and tilt), unfiltered about its least-squares plane (Ra as the flat-face "
+        "Ra, of the form-error map)",
     )
     plots["form_error"] = fe
     return out, plots
