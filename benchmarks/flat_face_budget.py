@@ -68,9 +68,10 @@ def main(argv=None) -> int:
     from servosurf import _parts
     from servosurf._progress import set_quiet
     from servosurf.cutting import Material, Workpiece
-    from servosurf.metrology._interferometer import load_instrument, measure
+    from servosurf.metrology import load_instrument, measure
     from servosurf.noise import realise
     from servosurf.report import FlatFaceModel, flat_face_budget, flat_face_ra
+    from servosurf.run import preset
     from servosurf.servo import PSDModel, ServoLoop
     from servosurf.toolpath import field_reach, sample
 
@@ -86,7 +87,8 @@ def main(argv=None) -> int:
     spec, fs = model.spec, model.machine.controller.sample_rate
     inst = load_instrument("cp300-20x")
     # base-only realisation with the same draw: the base part of "vibration"
-    m = model.machine.with_moving_mass(0.175).with_bandwidth(1448.0)
+    cut = preset("paper-cutting")  # the paper's cutting set-up
+    m = model.machine.with_moving_mass(cut.mass).with_bandwidth(cut.bandwidth)
     d = dataclasses.replace(m.disturbances, sensor_noise=PSDModel(),
                             current_noise=PSDModel())
     base = realise(ServoLoop(dataclasses.replace(m, disturbances=d)),

@@ -61,7 +61,7 @@ from servosurf.scale import (  # noqa: E402
     reuse_freed_memory,
     simulate_face,
 )
-from servosurf.toolpath._sweep import prepare_path, run_kernel  # noqa: E402
+from servosurf.toolpath import prepare_path, run_kernel  # noqa: E402
 
 CASES: dict[str, Callable[[bool], dict]] = {}
 
@@ -482,11 +482,12 @@ def _warm_realisation() -> None:
     """Load the simulation kernels in a dask worker (one numba thread)."""
     import numba
 
-    from servosurf.simulation import realisation_study
+    from servosurf.report import realisation_study
+    from servosurf.run import RunConfig
 
     numba.set_num_threads(1)
-    realisation_study(ROOT / "toolpaths" / "lenslet_5um.toml", seeds=[0],
-                      instrument=None, n_threads=1)
+    realisation_study(ROOT / "toolpaths" / "lenslet_5um.toml",
+                      RunConfig(instrument=None, n_threads=1), seeds=[0])
 
 
 @case("realisations_dask")
@@ -496,22 +497,24 @@ def realisations_dask(quick: bool) -> dict:
     import distributed
 
     from servosurf._progress import set_quiet
-    from servosurf.simulation import realisation_study
+    from servosurf.report import realisation_study
+    from servosurf.run import RunConfig
 
     set_quiet(True)
     seeds = list(range(4 if quick else 8))
     toolpath = ROOT / "toolpaths" / "lenslet_5um.toml"
-    kw = {"instrument": None, "n_threads": 1}
-    realisation_study(toolpath, seeds=[0], **kw)  # warm
+    # the machine's own set-up, no instrument model, one numba thread per task
+    run = RunConfig(instrument=None, n_threads=1)
+    realisation_study(toolpath, run, seeds=[0])  # warm
     t0 = time.perf_counter()
-    local = realisation_study(toolpath, seeds=seeds, **kw)
+    local = realisation_study(toolpath, run, seeds=seeds)
     t_local = time.perf_counter() - t0
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cl, \
             distributed.Client(cl) as client:
         client.run(_warm_realisation)
         t0 = time.perf_counter()
-        dres = realisation_study(toolpath, seeds=seeds, client=client, **kw)
+        dres = realisation_study(toolpath, run, seeds=seeds, client=client)
         t_dask = time.perf_counter() - t0
     same = all(np.array_equal(local.metrics[k], dres.metrics[k], equal_nan=True)
                for k in local.metrics)
@@ -616,9 +619,10 @@ def realisation_whole_part(quick: bool) -> dict:
     import tempfile
 
     from servosurf.noise import VibrationStream, realise
-    from servosurf.servo import ServoLoop, load_machine
+    from servosurf.run import preset
+    from servosurf.servo import ServoLoop
 
-    loop = ServoLoop(load_machine().with_moving_mass(0.175).with_bandwidth(1448))
+    loop = ServoLoop(preset("paper-cutting").machine_model())
     n_fft = 2_000_000 if quick else 12_000_000  # 60 s of cutting at 199.6 kHz
     realise(loop, 4096, seed=0)  # warm-up
     t_fft = best_time(lambda: realise(loop, n_fft, seed=1), repeat=1)

@@ -17,14 +17,18 @@ UPM = SHARED / "data" / "upm_sts"
 
 
 @pytest.fixture(autouse=True, scope="session")
-def _quiet_progress():
-    """Keep progress lines out of captured CLI output, and check defaults unchanged."""
-    from servosurf._progress import is_quiet, set_quiet
+def _defaults_unchanged():
+    """Keep progress lines out of captured output; assert no test (and no library
+    call) left a process knob of ``servosurf.defaults`` changed (python-control's
+    ``control_defaults``)."""
+    from servosurf import defaults, set_defaults
 
-    before = is_quiet()
-    set_quiet(True)
+    before = dict(defaults)
+    set_defaults(quiet=True)
     yield
-    set_quiet(before)
+    after = dict(defaults)
+    set_defaults(quiet=before["quiet"])
+    assert after == {**before, "quiet": True}, "servosurf.defaults changed"
 
 
 @pytest.fixture(scope="session")

@@ -68,14 +68,14 @@ def outside_loop(loop, parts: Sequence[str], n: int,
     machine = loop.machine
     if "out-of-loop" in parts:
         if machine.sensor.target == "fts-base":
-            from .noise._synthesis import realise
+            from .noise import realise
 
             real = realise(loop, int(n), seed=int(seed), out_of_loop=True)
             out["out-of-loop"] = real.out_of_loop
         else:  # the sensor sees frame motion: nothing bypasses the loop
             out["out-of-loop"] = np.zeros(n)
     if "spindle" in parts:
-        from .noise._spindle import realise_spindle_axial
+        from .noise import realise_spindle_axial
 
         # the face moving toward the tool lowers the tool relative to the face
         out["spindle"] = -realise_spindle_axial(
@@ -109,7 +109,7 @@ def machine_surface(path, tool, field, initial, workpiece, parts: Sequence[str],
     Surface
         Heights in m.
     """
-    from .cutting._rules import cutting_rules
+    from .cutting import cutting_rules
     from .toolpath import sweep, sweep_ordered
 
     rules = cutting_rules(workpiece.material, tool, parts)
@@ -133,7 +133,7 @@ def part_settings(machine, tool, workpiece, parts: Sequence[str]) -> dict[str, A
             "fmin_hz": machine.spindle.fmin,
         }
     if any(p in parts for p in MATERIAL_PARTS):
-        from .cutting._rules import cutting_rules
+        from .cutting import cutting_rules
 
         out["edge_radius_m"] = tool.edge_radius
         out["material_rules"] = cutting_rules(workpiece.material, tool,

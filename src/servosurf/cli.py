@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
         Exit status: 0 on success (and for ``--help``), 1 on a user error (a bad
         flag or value included), 130 when interrupted.
     """
-    from .commands._common import commit_outputs, discard_outputs
+    from .commands import commit_outputs, discard_outputs
     from .errors import ServosurfError
 
     parser = build_parser()

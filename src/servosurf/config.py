@@ -31,6 +31,8 @@ __all__ = [
     "to_mapping",
     "load_toml",
     "dump_toml",
+    "toml_value",
+    "check_bounds",
     "describe",
 ]
 
@@ -103,8 +105,27 @@ def _type_name(tp: Any) -> str:
     return str(tp).replace("typing.", "")
 
 
-def _check_bounds(value: Any, meta: Mapping[str, Any], dotted: str,
-                  default: Any = None) -> None:
+def check_bounds(value: Any, meta: Mapping[str, Any], dotted: str,
+                 default: Any = None) -> None:
+    """Check a number against the bounds a :func:`param` field declares.
+
+    Parameters
+    ----------
+    value : object
+        The value (anything but an int or float passes).
+    meta : Mapping
+        The field's metadata (``low``, ``high``, ``low_open``, ``plausible``,
+        ``unit``, ``doc``).
+    dotted : str
+        The dotted key named in the message.
+    default : object, optional
+        The field's default, quoted as the typical value of a plausible range.
+
+    Raises
+    ------
+    ConfigError
+        When the value is not finite or lies outside the bounds.
+    """
     if not isinstance(value, int | float) or isinstance(value, bool):
         return
     low, high = meta.get("low"), meta.get("high")
@@ -245,7 +266,7 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], *, prefix: str = "") -> 
             )
         f = fields[name]
         converted = _convert(value, hints[name], dotted)
-        _check_bounds(converted, f.metadata, dotted, f.default)
+        check_bounds(converted, f.metadata, dotted, f.default)
         kwargs[name] = converted
     missing = [
         n
@@ -321,7 +342,8 @@ def _encoding_message(path: Path, exc: UnicodeDecodeError) -> str:
     )
 
 
-def _toml_value(v: Any) -> str:
+def toml_value(v: Any) -> str:
+    """One value as TOML text (bool, int, float, str or a list of them)."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -331,7 +353,7 @@ def _toml_value(v: Any) -> str:
     if isinstance(v, str):
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, list | tuple):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
@@ -339,7 +361,7 @@ def _toml_key(k: str) -> str:
     """A bare TOML key, or a quoted one when it holds other characters (dots)."""
     import re
 
-    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _toml_value(k)
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else toml_value(k)
 
 
 def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
@@ -379,7 +401,7 @@ def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
         elif path and scalars:
             lines.append(f"\n[{path}]")
         for k, v in scalars.items():
-            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+            lines.append(f"{_toml_key(k)} = {toml_value(v)}")
         for k, v in subs.items():
             emit(v, f"{path}.{k}" if path else k)
         for k, v in arrays.items():

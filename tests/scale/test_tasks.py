@@ -74,7 +74,7 @@ def test_realisations_on_workers_equal_one_process(client):
     import dataclasses
 
     import servosurf.toolpath as tp
-    from servosurf.simulation import realisation_study
+    from servosurf.report import realisation_study
 
     spec = tp.load_toolpath("toolpaths/lenslet_5um.toml")
     fld = dataclasses.replace(spec.field, pitch_x=2e-6, pitch_y=2e-6, nx=80, ny=80)

@@ -169,8 +169,8 @@ def test_simulate_cli_errors(argv, match, capsys, tmp_path):
 
 
 def test_realisations_match_single_runs(small_lens):
+    from servosurf.report import realisation_study
     from servosurf.report._simulation import analyse
-    from servosurf.simulation import realisation_study
 
     seeds = [0, 3, 5]
     study = realisation_study(small_lens, seeds=seeds, instrument=None)
@@ -200,14 +200,14 @@ def test_realisation_lines_matched_by_frequency():
     277 mm^-1 line in seed 1, and seed 2 has no 277 line. Ranking per seed would
     put 277 into "peak1" for seed 1 and average two different lines.
     """
-    from servosurf.simulation import _match_lines
+    from servosurf.report import match_lines
 
     peaks = [
         [(170e3, 10.0), (277e3, 5.0), (400e3, 1.0)],
         [(277.5e3, 12.0), (171e3, 8.0)],
         [(172e3, 9.0)],
     ]
-    lines = _match_lines(peaks)
+    lines = match_lines(peaks)
     np.testing.assert_array_equal(lines["peak1_per_m"], [170e3, 171e3, 172e3])
     np.testing.assert_array_equal(lines["peak2_per_m"], [277e3, 277.5e3, np.nan])
     # a line seen in fewer than half of the seeds (400) is not reported
@@ -215,7 +215,7 @@ def test_realisation_lines_matched_by_frequency():
 
 
 def test_realisations_bad_seeds(small_lens):
-    from servosurf.simulation import realisation_study
+    from servosurf.report import realisation_study
 
     with pytest.raises(ConfigError, match="seeds"):
         realisation_study(small_lens, seeds=[])

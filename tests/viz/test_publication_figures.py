@@ -191,8 +191,8 @@ def test_loop_bode_holds_the_open_loop(monkeypatch, tmp_path):
 def test_highpass_figure_masks_the_filter_rim(monkeypatch, tmp_path):
     """simulate's high-pass picture drops the band within half a cut-off of the
     map's edge (the Gaussian filter's end effect) and keeps the rest."""
-    from servosurf.commands import simulate as cmd
-    from servosurf.report._simulation import HIGH_PASS_CUTOFF
+    from servosurf.report import HIGH_PASS_CUTOFF
+    from servosurf.viz import plot_highpass
 
     shown = {}
 
@@ -206,7 +206,8 @@ def test_highpass_figure_masks_the_filter_rim(monkeypatch, tmp_path):
     r = np.hypot(x, y)
     z = np.where(r < 50e-6, 1e-10 * np.sin(x / 2e-6), np.nan)  # a lenslet's disc
     z[(r > 45e-6) & (r < 50e-6)] = -14e-9  # a rim artefact, 5 um wide
-    cmd._highpass_figure({"highpass": Surface(z, dx, dx)}, tmp_path / "h.png")
+    plot_highpass({"highpass": Surface(z, dx, dx)}, tmp_path / "h.png",
+                  cutoff=HIGH_PASS_CUTOFF)
     out = shown["surface"].z
     rim = 0.5 * HIGH_PASS_CUTOFF  # 6.25 um: the artefact band lies inside it
     assert np.all(np.isnan(out[r > 50e-6 - rim + dx]))

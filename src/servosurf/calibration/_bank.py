@@ -13,11 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ModelError
-from ..noise._psd import frequency_grid
-from ..noise._study import loop_limit
-from ..noise._synthesis import SOURCES
-from ..servo._loop import ServoLoop
-from ..servo._machine import Machine
+from ..noise import SOURCES, frequency_grid, loop_limit
+from ..servo import Machine, ServoLoop
 
 __all__ = ["ErrorBank", "curve_minimum", "bandwidth_for_3db"]
 

@@ -30,8 +30,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..config import _toml_value, to_mapping
-from ..servo._machine import (
+from ..config import to_mapping, toml_value
+from ..servo import (
     Actuator,
     Controller,
     Disturbances,
@@ -599,7 +599,7 @@ def _machine_toml(machine: Machine) -> str:
             if array:
                 key = f"{path}.{table.get('name', '?')}.{k}"
             label = prov.get(key)
-            text = f"{k} = {_toml_value(v)}"
+            text = f"{k} = {toml_value(v)}"
             lines.append(f"{text}  # {label}" if label else text)
         for k, v in subs.items():
             if array:
@@ -615,14 +615,14 @@ def _machine_toml(machine: Machine) -> str:
         lines.append(f"[{path}]")
         for k, v in table.items():
             label = prov.get(f"{provpath}.{k}")
-            text = f"{k} = {_toml_value(v)}"
+            text = f"{k} = {toml_value(v)}"
             lines.append(f"{text}  # {label}" if label else text)
 
     emit(data, "")
     lines.append("")
     lines.append("[provenance]")
     for k in sorted(prov):
-        lines.append(f"{_toml_value(k)} = {_toml_value(prov[k])}")
+        lines.append(f"{toml_value(k)} = {toml_value(prov[k])}")
     return "\n".join(lines) + "\n"
 
 

@@ -14,10 +14,8 @@ from typing import Any
 import numpy as np
 import scipy as sp
 
-from ..cutting._cycle import cutting_cycle_stats
-from ..cutting._force import ChipModel
-from ..servo._loop import ServoLoop
-from ..servo._machine import Machine
+from ..cutting import ChipModel, cutting_cycle_stats
+from ..servo import Machine, ServoLoop
 from ._structure import FIG13C_BANDWIDTH, HEAVY_MASS
 
 __all__ = ["lenslet_cut", "solve_thrust_pressure", "LENS5"]
@@ -84,7 +82,8 @@ def solve_thrust_pressure(
 ) -> float:
     """Thrust pressure (Pa) giving the paper's simulated peak deviation (Fig. 17b).
 
-    Brent's method on ``log k_t`` at 1448 Hz, 0.175 kg (the cut's set-up).
+    Brent's method on ``log k_t`` at the paper's cutting set-up (``HEAVY_MASS``,
+    ``FIG13C_BANDWIDTH``: 1448 Hz, 0.175 kg).
     """
     heavy = machine.with_moving_mass(HEAVY_MASS)
     loop = ServoLoop(heavy.with_bandwidth(FIG13C_BANDWIDTH))

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy as sp
 
-from ..servo._machine import Disturbances, Machine, PSDModel
+from ..servo import Disturbances, Machine, PSDModel
 from ._bank import ErrorBank, bandwidth_for_3db, curve_minimum
 from ._figures import FIGURES, PaperFigure, within
 
@@ -258,7 +258,7 @@ def make_bank(machine: Machine, *, n_bandwidths: int = 72, n_freq: int = 2000):
     bandwidths the paper names (301, 468, 1000, 1448, 1500 Hz) and the crossovers
     whose closed-loop -3 dB bandwidth is 468 Hz (section 3.3's reading).
     """
-    from ..noise._psd import frequency_grid
+    from ..noise import frequency_grid
 
     x3 = tuple(
         bandwidth_for_3db(machine.with_moving_mass(m), 468.0) for m in (0.075, 0.175)

@@ -15,9 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from ..noise._study import loop_limit
-from ..servo._loop import ServoLoop
-from ..servo._machine import Machine
+from ..noise import loop_limit
+from ..servo import Machine, ServoLoop
 from ._structure import FIG13C_BANDWIDTH, HEAVY_MASS
 
 __all__ = ["stability_mechanism", "critical_pole", "overshoot_gap", "SPRING_NAMES"]

@@ -33,10 +33,9 @@ import numpy as np
 import scipy as sp
 
 from ..errors import ModelError
-from ..noise._study import loop_state
-from ..noise._synthesis import synthesize
-from ..servo._loop import ServoLoop
-from ..servo._machine import Disturbances, Machine
+from ..noise import loop_state, synthesize
+from ..run import PRESETS
+from ..servo import Disturbances, Machine, ServoLoop
 
 __all__ = [
     "StructureParams",
@@ -51,10 +50,10 @@ __all__ = [
     "FIG13C_BANDWIDTH",
 ]
 
-#: The paper's heavier moving mass, kg (sections 3.3, 4.1).
-HEAVY_MASS = 0.175
-#: Crossover of Fig. 13c, the lenslet cuts and Fig. 17, Hz.
-FIG13C_BANDWIDTH = 1448.0
+#: The paper's heavier moving mass, kg (sections 3.3, 4.1): the cutting set-up's.
+HEAVY_MASS = float(PRESETS["paper-cutting"].mass)
+#: Crossover of Fig. 13c, the lenslet cuts and Fig. 17, Hz: the cutting set-up's.
+FIG13C_BANDWIDTH = float(PRESETS["paper-cutting"].bandwidth)
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_write
+from ..run import DEFAULT_PRESET, PRESETS
 
 __all__ = [
     "atomic_write",
@@ -228,11 +229,15 @@ def discard_outputs() -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+#: The typical set-up quoted in the flags' messages: the paper's cutting set-up.
+_TYPICAL = PRESETS[DEFAULT_PRESET]
+
 #: Plausible ranges of numeric flags: attribute -> (unit, low, high, typical, what).
 FLAG_RANGES = {
-    "bandwidth": ("Hz", 1.0, 5e4, 1448.0, "open-loop crossover bandwidth"),
-    "bandwidths": ("Hz", 1.0, 5e4, 1448.0, "open-loop crossover bandwidth"),
-    "mass": ("kg", 1e-3, 50.0, 0.175, "moving mass m1+m2"),
+    "bandwidth": ("Hz", 1.0, 5e4, _TYPICAL.bandwidth, "open-loop crossover bandwidth"),
+    "bandwidths": ("Hz", 1.0, 5e4, _TYPICAL.bandwidth,
+                   "open-loop crossover bandwidth"),
+    "mass": ("kg", 1e-3, 50.0, _TYPICAL.mass, "moving mass m1+m2"),
     "radius": ("m", 1e-5, 1.0, 0.01, "face radius"),
     "pitch": ("m", 1e-9, 1e-3, 1e-6, "grid pitch"),
 }

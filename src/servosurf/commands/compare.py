@@ -55,15 +55,17 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--bandwidth",
         metavar="HZ",
         type=float,
-        default=1448.0,
-        help="crossover bandwidth in Hz for --toolpath (default 1448)",
+        default=None,
+        help="crossover bandwidth in Hz for --toolpath (default 1448, the paper's "
+        "cutting set-up: run preset paper-cutting)",
     )
     p.add_argument(
         "--mass",
         metavar="KG",
         type=float,
-        default=0.175,
-        help="moving mass in kg for --toolpath (default 0.175)",
+        default=None,
+        help="moving mass in kg for --toolpath (default 0.175, the paper's cutting "
+        "set-up: run preset paper-cutting)",
     )
     p.add_argument(
         "--seed", metavar="N", type=int, default=0, help="seed for --toolpath"
@@ -182,7 +184,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     from .._progress import stage
     from ..io import read_any
-    from ..report._profile_compare import as_profile_or_none
+    from ..report import as_profile_or_none
     from ._common import check_flags
 
     check_flags(args)  # --bandwidth, --mass: positive and plausible
@@ -191,16 +193,15 @@ def run(args) -> int:
         if args.simulated:
             simulated, _ = read_any(args.simulated)
         else:
+            from ..run import DEFAULT_PRESET, preset
             from ..simulation import simulate
 
-            res = simulate(
-                args.toolpath,
-                machine=args.machine,
-                workpiece=args.workpiece,
-                bandwidth=args.bandwidth,
-                mass=args.mass,
-                seed=args.seed,
-            )
+            # the paper's cutting set-up unless given; the machined map (no
+            # instrument model)
+            run_cfg = preset(DEFAULT_PRESET).replace(instrument=None).with_overrides(
+                machine=args.machine, workpiece=args.workpiece,
+                bandwidth=args.bandwidth, mass=args.mass, seed=args.seed)
+            res = simulate(args.toolpath, run_cfg)
             simulated = res.measured if res.measured is not None else res.surface
     profiles = (
         args.profile
@@ -239,7 +240,7 @@ def _run_profiles(args, measured, simulated) -> int:
     """Profile comparison: registration, roughness side by side, figures, JSON."""
     from .._progress import stage
     from .._validation import check_positive
-    from ..report._profile_compare import compare_profiles
+    from ..report import compare_profiles
     from ._common import output_folder, print_json, write_json
 
     cutoff = None if args.cutoff is None else check_positive(
@@ -332,60 +333,22 @@ def _print_profiles(out: dict) -> None:
 
 def _run_maps(args, measured, simulated) -> int:
     """Map comparison (unchanged behaviour): registration, residual, spectra."""
-    import numpy as np
-
     from .._progress import stage
-    from ..report._compare import compare_surfaces
-    from ..viz._common import figure, save
-    from ..viz._surface_plots import plot_map
+    from ..report import compare_surfaces
     from ._common import output_folder, print_json, write_json
 
     with stage("registration and residual"):
-        out = compare_surfaces(
+        comparison = compare_surfaces(
             measured,
             simulated,
             remove=tuple(args.remove),
             axis=0 if args.axis == "y" else 1,
             register=not args.no_register,
         )
-    plots = out.pop("_plots")
+    out = comparison.to_dict()
     d = output_folder(args.out)  # swapped in place of --out at the end
     with stage("figures"):
-        plot_map(
-            plots["residual"],
-            d / "residual.png",
-            title=f"residual (measured - simulated), RMS "
-            f"{out['rms_residual_m'] * 1e9:.2f} nm",
-        )
-        fm, pm, fs_, ps = plots["spectra"]
-        fig, ax = figure(figsize=(8, 4.5))
-        ax.semilogy(fm / 1e3, pm * 1e21, label="measured")
-        ax.semilogy(fs_ / 1e3, ps * 1e21, label="simulated", alpha=0.8)
-        for a, b in out["peaks_matched_per_m"]:
-            ax.axvline(a / 1e3, color="k", ls=":", lw=0.8)
-        ax.set_xlabel("spatial frequency [1/mm]")
-        ax.set_ylabel("PSD [nm^2 mm]")
-        ax.set_title("Spectra along the cutting direction (dotted: matched peaks)")
-        ax.legend()
-        save(fig, d / "spectra.png")
-        m, s = plots["measured"], plots["simulated"]
-        fig, ax = figure(figsize=(8, 4))
-        if args.axis == "y":
-            j = m.shape[1] // 2
-            x = m.y0 + m.dy * np.arange(m.shape[0])
-            ax.plot(x * 1e6, m.z[:, j] * 1e9, label="measured")
-            ax.plot(x * 1e6, s.z[:, j] * 1e9, label="simulated")
-        else:
-            i = m.shape[0] // 2
-            x = m.x0 + m.dx * np.arange(m.shape[1])
-            ax.plot(x * 1e6, m.z[i] * 1e9, label="measured")
-            ax.plot(x * 1e6, s.z[i] * 1e9, label="simulated")
-        ax.set_xlabel(f"{args.axis} [um]")
-        ax.set_ylabel("height [nm]")
-        ax.set_title("Profile through the map centre along the cutting direction")
-        ax.legend()
-        save(fig, d / "profiles.png")
-    out["files"] = {k: str(d / f"{k}.png") for k in ("residual", "spectra", "profiles")}
+        out["files"] = comparison.plot(d, axis=args.axis)
     write_json(d / "compare.json", out)
     if args.json:
         print_json(out)

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from ._common import add_scheduler_args
 
 
@@ -33,10 +31,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--chunk", metavar="N", type=int, default=1024,
                    help="chunk (task) size in pixels per side (default 1024)")
     p.add_argument("--machine", metavar="M.toml", help="machine TOML or built-in name")
-    p.add_argument("--bandwidth", metavar="HZ", type=float, default=1448.0,
-                   help="crossover bandwidth in Hz (default 1448)")
-    p.add_argument("--mass", metavar="KG", type=float, default=0.175,
-                   help="moving mass in kg (default 0.175)")
+    p.add_argument("--bandwidth", metavar="HZ", type=float, default=None,
+                   help="crossover bandwidth in Hz (default 1448, the paper's cutting "
+                   "set-up: run preset paper-cutting)")
+    p.add_argument("--mass", metavar="KG", type=float, default=None,
+                   help="moving mass in kg (default 0.175, the paper's cutting "
+                   "set-up: run preset paper-cutting)")
     p.add_argument("--seed", metavar="N", type=int, default=0, help="vibration seed")
     p.add_argument("--no-vibration", action="store_true", help="kinematic surface only")
     add_scheduler_args(p, "the tiles (one task per tile)")
@@ -68,10 +68,12 @@ def _check_footprint(args, spec, field) -> dict:
     import math
 
     from .._resources import check_resources
-    from ..scale._face import MAX_TILE_SAMPLES
+    from ..scale import MAX_TILE_SAMPLES
+    from ..servo import load_machine
 
     on_face = math.pi * args.radius**2 / args.pitch**2
-    samples = spec.path.duration * 199.6e3 if not args.no_vibration else 0.0
+    fs = load_machine(args.machine).controller.sample_rate
+    samples = spec.path.duration * fs if not args.no_vibration else 0.0
     # the array compresses to about 0.7 of 8 B per pixel; the vibration is float32
     disk = 8.0 * on_face + 4.0 * samples
     # per process: a chunk and its inputs, one windowed path, the preview window
@@ -85,20 +87,10 @@ def _check_footprint(args, spec, field) -> dict:
 
 
 def run(args) -> int:
-    import dataclasses
-
-    from .._progress import bar, stage
+    from .._progress import bar
     from ..errors import ConfigError
-    from ..scale import (
-        MemmapDeviation,
-        face_field,
-        face_preview,
-        simulate_face,
-        write_vibration,
-    )
-    from ..servo import ServoLoop, load_machine
-    from ..toolpath import load_toolpath
-    from ..viz._surface_plots import plot_map
+    from ..run import DEFAULT_PRESET, preset
+    from ..scale import face_toolpath, simulate_face_run
     from ._common import (
         check_flags,
         dask_client,
@@ -116,79 +108,30 @@ def run(args) -> int:
     if args.chunk < 16:
         raise ConfigError(f"--chunk must be at least 16 pixels, got {args.chunk}")
     _check_zarr()
-    spec = load_toolpath(args.toolpath)
-    if spec.kind != "facing":
-        raise ConfigError(
-            f"{args.toolpath}: face needs a facing toolpath, got {spec.kind!r}"
-        )
-    field = face_field(args.radius, args.pitch)
-    # the path runs from one arc half-width outside the face to the axis
-    reach = spec.tool.chord_half_width(spec.path.depth_of_cut + 1e-6)
-    path = dataclasses.replace(spec.path, r_start=args.radius + reach, r_end=0.0)
-    spec = dataclasses.replace(spec, field=field, path=path)
+    # the paper's cutting set-up unless given
+    run_cfg = preset(DEFAULT_PRESET).with_overrides(
+        machine=args.machine, bandwidth=args.bandwidth, mass=args.mass, seed=args.seed)
+    spec = face_toolpath(args.toolpath, args.radius, args.pitch)
+    field = spec.field
     footprint = _check_footprint(args, spec, field)
     out = output_folder(args.out)  # swapped in place of --out at the end
-    deviation = None
     summary: dict = {"toolpath": args.toolpath, "radius_m": args.radius,
                      "pitch_m": args.pitch, "grid": [field.ny, field.nx],
                      "vibration": not args.no_vibration, "seed": args.seed,
                      "estimate": footprint}
-    if not args.no_vibration:
-        machine = load_machine(args.machine).with_moving_mass(args.mass)
-        loop = ServoLoop(machine.with_bandwidth(args.bandwidth))
-        if not loop.is_stable():
-            raise ConfigError(f"the loop is unstable at {args.bandwidth:g} Hz; lower "
-                              "--bandwidth")
-        n = int(np.ceil(spec.path.duration * loop.fs)) + 4
-        vib = out / "vibration.npy"
-        with stage(
-            f"vibration realisation: {n} samples ({n / loop.fs:.0f} s of cutting)"
-        ):
-            write_vibration(loop, vib, n, seed=args.seed,
-                            progress=lambda it: bar(it, desc="vibration"))
-        deviation = MemmapDeviation(str(vib.resolve()))
-        summary.update(bandwidth_hz=args.bandwidth, moving_mass_kg=args.mass,
-                       vibration_record={
-                           "file": str(vib), "unit": "m", "dtype": "float32",
-                           "sample_rate_hz": loop.fs, "t0_s": 0.0,
-                           "what": "tool-height deviation, sample k at t = k / "
-                                   "sample_rate_hz from the start of the cut"})
-    store = out / "face.zarr"
     if args.scheduler:
         summary["scheduler"] = args.scheduler
-    with dask_client(args.scheduler, args.workers) as client, \
-            stage(f"face {field.ny} x {field.nx} px in {args.chunk}-px tiles"):
-        res = simulate_face(spec, str(store), field=field, face_radius=args.radius,
-                            chunk=(args.chunk, args.chunk), deviation=deviation,
-                            client=client)
-    summary.update(seconds=res.seconds, points=res.n_points,
-                   points_per_s=res.points_per_s, tasks=res.n_tasks,
-                   path_samples=res.n_samples, zarr=str(store),
-                   zarr_attributes=dict(res.array.attrs))
-    with stage("area-averaged preview and statistics"):
-        # about as many preview pixels as the PNG shows (dpi 150): no resampling
-        z, step, stats = face_preview(res.array, max_pixels=560,
-                                      window=max(args.chunk, 256))
-        from ..metrology import Surface
-
-        half = 0.5 * (step - 1)
-        prev = Surface(z - stats["mean_m"], field.pitch_x * step, field.pitch_y * step,
-                       x0=field.x0 + half * field.pitch_x,
-                       y0=field.y0 + half * field.pitch_y)
-        what = (f"{step} x {step}-pixel block means" if step > 1
-                else "every pixel")
-        plot_map(prev, out / "face.png", robust=0.5, dpi=150,
-                 title=f"{2 * args.radius * 1e3:g} mm face at "
-                 f"{args.pitch * 1e6:g} um pitch ({what}),\nheight about the "
-                 f"face mean ({stats['mean_m'] * 1e9:.4g} nm)")
-        summary.update(preview_step=step, preview_block_px=step,
-                       face_mean_m=stats["mean_m"], face_sq_m=stats["sq_m"],
-                       face_pv_m=stats["max_m"] - stats["min_m"],
-                       face_statistics="every valid pixel, about the mean, "
-                       "unfiltered (no levelling: the face is flat by construction)")
+    with dask_client(args.scheduler, args.workers) as client:
+        face = simulate_face_run(
+            spec, out, run_cfg, radius=args.radius, chunk=args.chunk,
+            vibration=not args.no_vibration, client=client,
+            progress=lambda it: bar(it, desc="vibration"))
+    summary.update(face.to_dict())
+    face.plot(out)
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
+    res, stats = face.face, face.stats
     print_summary(
         args,
         f"face {args.toolpath}: {2 * args.radius * 1e3:g} mm diameter, "

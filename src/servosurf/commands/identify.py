@@ -37,7 +37,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    import numpy as np
 
     from .._progress import stage
     from ..servo import (
@@ -47,7 +46,7 @@ def run(args) -> int:
         open_loop_frf,
         read_frf_csv,
     )
-    from ..viz._common import figure, save
+    from ..viz import plot_frf_fit
     from ._common import atomic_write, output_folder, print_json, write_json
 
     machine = load_machine(args.machine)
@@ -62,23 +61,11 @@ def run(args) -> int:
         f"{res.fit_percent_before:.2f} %)"
     )
     atomic_write(out / "fitted-machine.toml", lambda p: p.write_text(text))
-    fig, ax = figure(2, 1, figsize=(8, 6), sharex=True)
-    for lab, m, st in (
-        ("measured", None, "k."),
-        ("before", machine, "C0--"),
-        ("after", res.machine, "C3-"),
-    ):
-        h = y if m is None else open_loop_frf(m, f, digital=not args.analogue)
-        ax[0].loglog(f, np.abs(h), st, ms=2, label=lab)
-        ax[1].semilogx(f, np.degrees(np.angle(h)), st, ms=2)
-    ax[0].set_ylabel("|u -> sensor| [V/V]")
-    ax[1].set_ylabel("phase [deg]")
-    ax[1].set_xlabel("frequency [Hz]")
-    ax[0].legend()
-    ax[0].set_title(
-        f"fit {res.fit_percent_before:.1f} % -> {res.fit_percent_after:.1f} %"
-    )
-    save(fig, out / "identify.png")
+    digital = not args.analogue
+    plot_frf_fit(f, y, open_loop_frf(machine, f, digital=digital),
+                 open_loop_frf(res.machine, f, digital=digital), out / "identify.png",
+                 title=f"fit {res.fit_percent_before:.1f} % -> "
+                 f"{res.fit_percent_after:.1f} %")
     summary = {
         "parameters": res.parameters,
         "initial": res.initial,

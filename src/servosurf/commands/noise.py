@@ -62,13 +62,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> int:
-    import numpy as np
-
     from .._progress import bar, stage
-    from ..errors import ConfigError
-    from ..noise import design_study, frequency_grid, synthesize
-    from ..servo import ServoLoop, load_machine
-    from ..viz import _servo_plots as vz
+    from ..noise import noise_study
+    from ..run import preset
+    from ..servo import load_machine
     from ._common import (
         check_flags,
         dask_client,
@@ -81,110 +78,23 @@ def run(args) -> int:
     if args.disturbances:
         machine = machine.with_disturbances(args.disturbances)
     check_flags(args)  # --mass, --bandwidth(s): positive and plausible
-    masses = args.mass or [0.075, 0.175]
-    bw = args.bandwidth if args.bandwidth is not None else machine.controller.bandwidth
-    if not (bw > 0 and np.isfinite(bw)):
-        raise ConfigError(f"--bandwidth must be a positive frequency in Hz, got {bw!r}")
-    grid = np.array(args.bandwidths if args.bandwidths else np.geomspace(200, 1800, 17))
-    if np.any(~np.isfinite(grid)) or np.any(grid <= 0):
-        raise ConfigError("--bandwidths must be positive frequencies in Hz")
+    # default: the paper's two masses (bare carrier, and with the added mass)
+    masses = args.mass or [preset("paper-optimum-light").mass,
+                           preset("paper-cutting").mass]
     out = output_folder(args.out)  # swapped in place of --out at the end
-    fs = machine.controller.sample_rate
-    freq = frequency_grid(fs)
-    summary: dict = {
-        "machine": machine.name,
-        "disturbances": machine.disturbances.name,
-        "bandwidth_hz": bw,
-        "bandwidth_definition": "open-loop crossover",
-        "masses": [],
-    }
-    frfs, budgets = {}, {}
-    with stage(f"closed loops at {bw:g} Hz"):
-        for m in masses:
-            mm = machine.with_moving_mass(m).with_bandwidth(bw)
-            loop = ServoLoop(mm)
-            stable = loop.is_stable()
-            label = f"{m:g} kg"
-            entry = {
-                "mass_kg": m,
-                "stable": stable,
-                "margins": loop.margins(),
-                "pidf": {
-                    "kp": loop.pidf.kp,
-                    "ki_per_s": loop.pidf.ki,
-                    "kd_s": loop.pidf.kd,
-                    "tf_s": loop.pidf.tf,
-                },
-            }
-            if stable:
-                frfs[label] = loop.frf(freq)
-                b = synthesize(loop, freq=freq)
-                budgets[label] = b
-                entry.update(
-                    rms_real_m=b.rms_real(),
-                    rms_following_m=b.rms_following(),
-                    power_shares=b.power_shares(),
-                    real_peaks_hz=b.peaks(),
-                )
-            summary["masses"].append(entry)
-    with dask_client(args.scheduler, args.workers) as client, \
-            stage("RMS against bandwidth (design study)"):
-        study = design_study(
-            machine,
-            masses,
-            grid,
-            progress=lambda it, total=None: bar(it, total=total, desc="masses"),
-            client=client,
-        )
+    with dask_client(args.scheduler, args.workers) as client:
+        result = noise_study(
+            machine, masses, args.bandwidth, args.bandwidths, client=client,
+            progress=lambda it, total=None: bar(it, total=total, desc="masses"))
+    summary = result.to_dict()
     if args.scheduler:
         summary["scheduler"] = args.scheduler
-    summary["study"] = study.to_dict()
-    shares_bw = {"sensor_noise": [], "current_noise": [], "base_vibration": []}
-    with stage("power shares against bandwidth"):
-        heavy = machine.with_moving_mass(masses[-1])
-        for b in grid:
-            try:
-                loop = ServoLoop(heavy.with_bandwidth(float(b)))
-                ok = loop.is_stable()
-            except Exception:
-                ok = False
-            sh = synthesize(loop, freq=freq).power_shares() if ok else None
-            for k in shares_bw:
-                shares_bw[k].append(sh[k] if sh else float("nan"))
-    summary["power_shares_vs_bandwidth"] = {
-        "mass_kg": masses[-1],
-        "bandwidths_hz": grid,
-        **shares_bw,
-    }
     with stage("figures"):
-        figs = {}
-        if frfs:
-            margins = {f"{e['mass_kg']:g} kg": e["margins"]
-                       for e in summary["masses"]}
-            figs["loop_bode"] = vz.plot_loop_bode(frfs, out / "loop_bode.png",
-                                                  margins)
-            figs["tool_frfs"] = vz.plot_tool_frfs(frfs, out / "tool_frfs.png")
-            figs["disturbance_frfs"] = vz.plot_disturbance_frfs(
-                frfs, out / "disturbance_frfs.png"
-            )
-            figs["cas"] = vz.plot_cas(budgets, out / "cas.png")
-            figs["error_spectra"] = vz.plot_error_spectra(
-                budgets, out / "error_spectra.png"
-            )
-        figs["rms_vs_bandwidth"] = vz.plot_rms_vs_bandwidth(
-            study, out / "rms_vs_bandwidth.png"
-        )
-        figs["power_shares"] = vz.plot_power_shares(
-            grid,
-            shares_bw,
-            out / "power_shares.png",
-            title=f"Real-error power share per source, {masses[-1]:g} kg (cf. Fig. 15)",
-        )
-        summary["figures"] = {k: str(v) for k, v in figs.items()}
+        summary["figures"] = result.plot(out)
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
-    _print_result(args, summary, study, bw, out)
+    _print_result(args, summary, result.study, summary["bandwidth_hz"], out)
     return 0
 
 

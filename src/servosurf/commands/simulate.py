@@ -252,9 +252,10 @@ def _check_footprint(args, spec, tp, out) -> None:
     """Estimate memory and disk before allocating; refuse above the machine's."""
     from .._resources import SIM_BYTES_PER_PIXEL, SIM_BYTES_PER_SAMPLE, check_resources
     from ..servo import load_machine
-    from ..simulation import SETTLE_TIME, _span
+    from ..simulation import SETTLE_TIME, cutting_span
+
     fs = load_machine(args.machine).controller.sample_rate
-    t0, t1 = _span(spec, spec.tool)
+    t0, t1 = cutting_span(spec, spec.tool)
     samples = (t1 - t0 + SETTLE_TIME) * fs
     f = spec.field
     pixels = float(f.nx) * float(f.ny)
@@ -268,24 +269,14 @@ def _check_footprint(args, spec, tp, out) -> None:
     )
 
 
-def _write_map(surface, path, fmt):
-    """Write the height map with the io writers (atomic), settings as metadata."""
-    from ..io import write_surface
-
-    write_surface(surface, path, format=fmt)
-    return path
-
-
 def run(args) -> int:
     from pathlib import Path
 
-    import numpy as np
-
     from .._progress import stage
     from ..errors import ConfigError
-    from ..report._simulation import analyse
+    from ..report import analyse
+    from ..run import DEFAULT_PRESET, preset
     from ..simulation import simulate
-    from ..viz import _surface_plots as sp
     from ._common import check_flags, output_folder, print_json, write_json
 
     check_flags(args)  # --bandwidth, --mass: positive and plausible
@@ -298,65 +289,36 @@ def run(args) -> int:
     edge = _measured_edge(args)
     spec = load_spec(args, edge)
     fmt = args.format or "datx"
-    instrument = args.instrument or ("none" if spec.kind == "nc" else "cp300-20x")
-    settings = {  # the paper's cutting set-up unless given
-        "machine": args.machine,
-        "workpiece": args.workpiece,
-        "bandwidth": 1448.0 if args.bandwidth is None else args.bandwidth,
-        "mass": 0.175 if args.mass is None else args.mass,
-        "parts": None if args.parts is None else tuple(args.parts),
-        "instrument": None if instrument == "none" else instrument,
-    }
+    # the paper's cutting set-up unless given; NC programs: no instrument model
+    run_cfg = preset(DEFAULT_PRESET).with_overrides(
+        machine=args.machine, workpiece=args.workpiece, bandwidth=args.bandwidth,
+        mass=args.mass, seed=args.seed,
+        parts=None if args.parts is None else tuple(args.parts),
+        instrument=args.instrument or ("none" if spec.kind == "nc" else None))
+    hooks = ()
     if edge is not None:
         from ..toolpath import MeasuredEdge
 
-        settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
+        hooks = (MeasuredEdge(edge, compensated=args.edge_compensated),)
     dest = args.out or Path("results") / tp.stem
     if spec.kind != "nc":
         _check_footprint(args, spec, tp, dest)
     out = output_folder(dest)  # swapped in place of --out at the end
     if args.realisations > 1:
-        return _run_realisations(args, spec, tp, out, settings)
-    res = simulate(spec, seed=args.seed, **settings)
+        return _run_realisations(args, spec, tp, out, run_cfg, hooks)
+    res = simulate(spec, run_cfg, hooks=hooks)
     if spec.kind == "nc":
         return _finish_nc(args, res, tp, fmt, out, edge)
     with stage("analysis"):
-        summary = analyse(res)
-    plots = summary.pop("_plots")
+        analysis = analyse(res)
+    summary = analysis.to_dict()
     surf = res.measured if res.measured is not None else res.surface
     files = {}
     with stage("writing map and figures"):
         files["map"] = str(_write_map(surf, out / f"surface.{fmt}", fmt))
-        files["map_png"] = str(
-            sp.plot_map(surf, out / "map.png", title=f"{tp.stem}: simulated height map")
-        )
-        files["highpass_png"] = str(_highpass_figure(plots, out / "highpass.png"))
-        if "form_error" in plots:  # design surface: error map against the design
-            from ..viz._form_plots import plot_design_feed, plot_form_error
-
-            files["form_error_png"] = str(plot_form_error(
-                plots["form_error"], out / "form_error.png",
-                title=f"{tp.stem}: form error against the design"))
-            fld = res.spec.field
-            files["toolpath_png"] = str(plot_design_feed(
-                res.spec.path, out / "toolpath.png",
-                theta=float(np.arctan2(fld.center_y, fld.center_x))))
-        files["spectrum_png"] = str(
-            _spectrum_figure(res, summary, plots, out / "spectrum.png"))
-        if "profile" in plots:
-            files["profile_png"] = str(
-                _profile_figure(res, plots, out / "profile.png"))
-        if res.t.size:
-            _plot_deviation(res, out / "deviation.png")
-            files["deviation_png"] = str(out / "deviation.png")
-        if not args.no_render:
-            from ..viz._render import render_surface
-
-            files["render_png"] = str(
-                render_surface(surf, out / "render.png", title=f"{tp.stem} (simulated)")
-            )
+        files.update(analysis.plot(out, name=tp.stem, render=not args.no_render))
         if args.mesh:
-            from ..viz._mesh import write_mesh
+            from ..viz import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
         manifest = _write_manifest(args, res, surf, files["map"], out)
@@ -424,70 +386,6 @@ def _write_manifest(args, res, surf, map_file, out):
     return path
 
 
-def _highpass_figure(plots, path):
-    """The 80 mm^-1 high-pass map, its filter-end rim masked, colours by percentile.
-
-    The Gaussian filter has no data beyond the map's edge (the lenslet's rim or the
-    field's border): within half a cut-off of it the high-pass holds the filter's
-    end effect, tens of times the texture, so that band is masked and the colour
-    scale spans the 0.5-99.5 percentiles of the rest.
-    """
-    import numpy as np
-    from scipy import ndimage
-
-    from ..report._simulation import HIGH_PASS_CUTOFF
-    from ..viz import _surface_plots as sp
-
-    hp = plots["highpass"]
-    valid = np.pad(np.isfinite(hp.z), 1, constant_values=False)
-    dist = ndimage.distance_transform_edt(valid, sampling=(hp.dy, hp.dx))[1:-1, 1:-1]
-    rim = 0.5 * HIGH_PASS_CUTOFF
-    shown = hp.replace(z=np.where(dist > rim, hp.z, np.nan))
-    what = " of the form error" if "profile" in plots else ""
-    return sp.plot_map(
-        shown, path, robust=0.5,
-        title=f"{1e-3 / HIGH_PASS_CUTOFF:g} mm^-1 high-pass{what}\n"
-        f"(a {rim * 1e6:.3g} um rim masked: filter end effect)")
-
-
-def _spectrum_figure(res, summary, plots, path):
-    """The PSD along the cut with every detected peak labelled (in mm^-1 and kHz).
-
-    ``summary.json`` lists the peaks above the high-pass cut-off; peaks below it
-    (attenuated by the filter, e.g. a tool mode on a slow facing cut) are found
-    the same way and drawn in grey in the shaded band.
-    """
-    import math
-
-    from ..metrology import find_peaks_spectrum
-    from ..report._simulation import PEAK_FMIN
-    from ..viz import _surface_plots as sp
-
-    freq, psd, peaks = plots["spectrum"]
-    speed = summary.get("surface_speed_m_per_s")
-    if speed is None and hasattr(res.spec.path, "angular_speed"):
-        f = res.spec.field
-        speed = res.spec.path.angular_speed * math.hypot(f.center_x, f.center_y)
-    low = [q for q in find_peaks_spectrum(freq, psd, n=5, fmax=PEAK_FMIN)
-           if q["freq_per_m"] < PEAK_FMIN]
-    return sp.plot_spectrum(
-        freq, psd, [*peaks, *low], path, speed=speed or None, fmin=PEAK_FMIN,
-        title="PSD along the cutting direction (y), peaks labelled")
-
-
-def _profile_figure(res, plots, path):
-    """The lenslet's centre profile along the cut (y) with the form error."""
-    from ..viz import _surface_plots as sp
-
-    y, z, fe = plots["profile"]
-    which = "simulated, as measured" if res.measured is not None else "simulated"
-    return sp.plot_profile_with_form_error(
-        y, z, fe["reference"], fe["error"], path,
-        xlabel="y, along the cut through the lenslet centre (\u00b5m)",
-        label=which, nominal_label="nominal at the air-cut amplitude",
-        title="Lenslet profile along the cutting direction and its form error")
-
-
 def _print_result(args, tp, res, summary, out) -> None:
     """The numbers a user came for, with units, and where they were written."""
     from ._common import fmt_length, print_summary
@@ -545,19 +443,18 @@ def _finish_nc(args, res, tp, fmt, out, edge=None) -> int:
 
     from .._progress import stage
     from ..report import analyse_nc
-    from ..viz._nc_plots import nc_figures
     from ._common import fmt_length, print_json, print_summary, write_json
 
     with stage("analysis of the centre profile"):
-        summary = analyse_nc(res, profile_length=args.profile_length)
-    plots = summary.pop("_plots")
+        analysis = analyse_nc(res, profile_length=args.profile_length)
+    summary = analysis.to_dict()
     surf = res.measured if res.measured is not None else res.surface
     files = {}
     with stage("writing map and figures"):
         files["map"] = str(_write_map(surf, out / f"surface.{fmt}", fmt))
-        files.update(nc_figures(res, plots, out, name=tp.stem))
+        files.update(analysis.plot(out, name=tp.stem))
         if args.mesh:
-            from ..viz._mesh import write_mesh
+            from ..viz import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
         if edge is not None:
@@ -583,13 +480,14 @@ def _finish_nc(args, res, tp, fmt, out, edge=None) -> int:
     return 0
 
 
-def _run_realisations(args, spec, tp, out, settings) -> int:
+def _run_realisations(args, spec, tp, out, run_cfg, hooks=()) -> int:
     """``--realisations K``: one simulation per seed, metrics and their spread.
 
-    ``settings`` are the :func:`~servosurf.simulation.simulate` keywords but the seed.
+    ``run_cfg`` is the run's :class:`~servosurf.run.RunConfig` (its seed is the
+    first of the K seeds).
     """
     from .._progress import bar, stage
-    from ..simulation import realisation_study
+    from ..report import realisation_study
     from ._common import dask_client, print_json, write_json
 
     seeds = list(range(args.seed, args.seed + args.realisations))
@@ -597,19 +495,20 @@ def _run_realisations(args, spec, tp, out, settings) -> int:
             stage(f"{len(seeds)} realisations (seeds {seeds[0]}..{seeds[-1]})"):
         study = realisation_study(
             spec,
+            run_cfg,
             seeds=seeds,
             client=client,
             progress=lambda it, total=None: bar(it, total=total, desc="realisations"),
-            **settings,
+            hooks=hooks,
         )
     summary = study.to_dict()
     summary.update(toolpath=str(tp), scheduler=args.scheduler,
-                   bandwidth_hz=settings["bandwidth"],
-                   moving_mass_kg=settings["mass"],
+                   bandwidth_hz=run_cfg.bandwidth,
+                   moving_mass_kg=run_cfg.mass,
                    parts=None if args.parts is None else list(args.parts),
-                   instrument=settings["instrument"] or "none")
+                   instrument=run_cfg.instrument or "none")
     with stage("writing realisations.json and realisations.png"):
-        png = _plot_realisations(study, out / "realisations.png")
+        png = study.plot(out / "realisations.png")
         summary["files"] = {"png": str(png)}
         write_json(out / "realisations.json", summary)
     if args.json:
@@ -637,64 +536,3 @@ def _print_realisations(args, tp, study, out) -> None:
     print_summary(args, f"simulate {tp.stem}: {study.seeds.size} vibration "
                   f"realisations (seeds {study.seeds[0]}..{study.seeds[-1]})", rows,
                   wrote=out)
-
-
-def _plot_realisations(study, path):
-    """Per-seed metrics as strip plots with their mean and 5-95 % band."""
-    import numpy as np
-
-    from ..viz._common import figure, save
-
-    shown = [
-        ("form_error_max_m", "max form error [nm]", 1e9),
-        ("ra_m", "Ra [nm]", 1e9),
-        ("sa_m", "Sa [nm]", 1e9),
-        ("peak1_per_m", "strongest spectral line (matched\nby frequency) [1/mm]", 1e-3),
-    ]
-    shown = [s for s in shown if np.isfinite(study.metrics[s[0]]).any()]
-    fig, axes = figure(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)
-    for ax, (key, label, scale) in zip(axes[0], shown, strict=True):
-        v = study.metrics[key] * scale
-        v = v[np.isfinite(v)]
-        x = np.random.default_rng(0).uniform(-0.15, 0.15, v.size)  # jitter only
-        ax.plot(x, v, "o", ms=4, alpha=0.7)
-        ax.axhline(v.mean(), color="C3", lw=1)
-        ax.axhspan(np.percentile(v, 5), np.percentile(v, 95), color="C3", alpha=0.12)
-        ax.set_xlim(-0.5, 0.5)
-        ax.set_xticks([])
-        ax.set_ylabel(label)
-    fig.suptitle(f"{study.seeds.size} vibration realisations: mean (line), 5-95 % "
-                 "(band)")
-    fig.tight_layout()
-    return save(fig, path)
-
-
-def _plot_deviation(res, path):
-    """Force, tool deviation and following error over the last cutting cycles."""
-    import numpy as np
-
-    from ..viz._common import figure, save
-
-    fs = res.machine.controller.sample_rate
-    n = min(res.t.size, int(0.035 * fs))
-    sl = slice(res.t.size - n, res.t.size)
-    t = (res.t[sl] - res.t[sl][0]) * 1e3
-    fig, ax = figure(2, 1, figsize=(8, 5.5), sharex=True)
-    ax[0].plot(t, res.force[sl], color="C3")
-    ax[0].set_ylabel("thrust force [N]")
-    for name, dev in res.deviation.items():
-        if np.any(dev[sl]):
-            ax[1].plot(t, dev[sl] * 1e9, label=name, lw=0.8)
-    ax[1].plot(
-        t,
-        res.following_error[sl] * 1e9,
-        "k",
-        lw=0.5,
-        alpha=0.6,
-        label="following error",
-    )
-    ax[1].set_ylabel("tool deviation [nm]")
-    ax[1].set_xlabel("time [ms]")
-    ax[1].legend(fontsize=7)
-    ax[0].set_title("Cutting force and tool deviation (cf. Fig. 17b)")
-    save(fig, path)

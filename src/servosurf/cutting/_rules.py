@@ -5,8 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from ..toolpath._ordered import CuttingRules
-from ..toolpath._tool import Tool
+from ..toolpath import CuttingRules, Tool
 from ._force import Material
 
 __all__ = ["MATERIAL_PARTS", "cutting_rules"]

@@ -37,6 +37,7 @@ from . import _datx, _metropro_dat, _mx_profile_csv, _npz, _x3p, _zygo_ascii, _z
 # Formtracer registers after MetroPro: a .dat file that neither content check
 # recognises falls back on the first reader of its suffix, the binary format.
 from . import _formtracer  # noqa: F401
+from ._common import decode_text, load_source
 from ._registry import (
     FormatInfo,
     encode_surface,
@@ -48,6 +49,8 @@ from ._registry import (
 )
 
 __all__ = [
+    "decode_text",
+    "load_source",
     "FormatInfo",
     "encode_surface",
     "formats",

@@ -23,7 +23,7 @@ from typing import IO, Any
 import numpy as np
 
 from ..errors import CorruptedFileError, FileFormatError, UnsupportedFileFormatError
-from ..metrology._surface import Profile, Surface
+from ..metrology import Profile, Surface
 
 __all__ = [
     "Source",
@@ -255,14 +255,14 @@ def make_surface(
 # ---------------------------------------------------------------- metadata
 def software_label() -> str:
     """``"servosurf <version>"``: the software string servosurf writes."""
-    from .. import __version__
+    from .._version import __version__
 
     return f"{SOFTWARE_NAME} {__version__}"
 
 
 def software_version_numbers() -> tuple[int, int, int]:
     """(major, minor, patch) of servosurf's version, for numeric header fields."""
-    from .. import __version__
+    from .._version import __version__
 
     parts = [int(p) if p.isdigit() else 0 for p in __version__.split(".")[:3]]
     return tuple((parts + [0, 0, 0])[:3])  # type: ignore[return-value]

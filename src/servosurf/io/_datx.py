@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
 from ..errors import UnitError
-from ..metrology._surface import Surface
+from ..metrology import Surface
 from ..units import length_factor
 from ._common import (
     Source,

@@ -13,7 +13,7 @@ import re
 import numpy as np
 
 from ..errors import UnitError
-from ..metrology._surface import Profile
+from ..metrology import Profile
 from ..units import length_factor
 from ._common import Source, corrupt, decode_text
 from ._registry import register_reader

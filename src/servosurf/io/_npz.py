@@ -12,7 +12,7 @@ from io import BytesIO
 
 import numpy as np
 
-from ..metrology._surface import Surface
+from ..metrology import Surface
 from ._common import (
     Source,
     check_pixel_size,

@@ -19,7 +19,7 @@ from typing import IO, Any, Literal
 import numpy as np
 
 from ..errors import FileFormatError, UnsupportedFileFormatError
-from ..metrology._surface import Profile, Surface
+from ..metrology import Profile, Surface
 from ._common import Source, as_surface, load_source
 
 __all__ = [

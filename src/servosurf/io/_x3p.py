@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__
-from ..metrology._surface import Profile, Surface
+from .._version import __version__
+from ..metrology import Profile, Surface
 from ._common import (
     Source,
     check_pixel_size,

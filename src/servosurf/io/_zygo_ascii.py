@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ..metrology._surface import Surface
+from ..metrology import Surface
 from ._common import (
     Source,
     check_pixel_size,

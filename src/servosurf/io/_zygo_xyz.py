@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..metrology._surface import Surface
+from ..metrology import Surface
 from ._common import (
     Source,
     check_pixel_size,

@@ -8,32 +8,20 @@
     a plain-numpy reference to 1 pm, which bounds its effect.
 
 ``CACHE``
-    Whether compiled kernels are cached on disk (numba ``cache=True``), so that a second
-    ``servosurf simulate`` does not pay the JIT compilation again. **Default: on.**
-    Set the environment variable ``SERVOSURF_NUMBA_CACHE=0`` (or ``false``/``off``/
-    ``no``) before importing servosurf to disable it.
-
-Notes
------
-Multiprocessing caveat: the cache lives in ``__pycache__`` beside the kernel sources
-(or in ``NUMBA_CACHE_DIR``). Worker processes that start at the same time on a cold
-cache (dask workers, ``multiprocessing`` pools) may all compile and write the same
-cache entry; numba writes the files atomically, so this costs time but not
-correctness. Warm the cache in the parent first (call the kernel once on a tiny case)
-or set ``SERVOSURF_NUMBA_CACHE=0`` on read-only installs. The cache is keyed on the
-source file and the CPU; a changed machine recompiles.
+    Whether compiled kernels are cached on disk (numba ``cache=True``): the
+    ``numba_cache`` knob of :data:`servosurf.defaults` when this module is first
+    imported. **Default: on** (``SERVOSURF_NUMBA_CACHE=0`` turns it off); the reason
+    and the multiprocessing caveat are stated in :mod:`servosurf._defaults`.
 """
 
 from __future__ import annotations
 
-import os
+from .._defaults import defaults
 
 __all__ = ["FASTMATH", "CACHE"]
 
 #: LLVM fast-math flags for every kernel (no ``nnan``/``ninf``: NaN and inf stay exact).
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
-_OFF = ("0", "false", "off", "no")
-
-#: Disk caching of compiled kernels (``SERVOSURF_NUMBA_CACHE=0`` disables it).
-CACHE = os.environ.get("SERVOSURF_NUMBA_CACHE", "1").strip().lower() not in _OFF
+#: Disk caching of compiled kernels (read once from ``defaults["numba_cache"]``).
+CACHE = bool(defaults["numba_cache"])

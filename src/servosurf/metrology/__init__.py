@@ -19,7 +19,7 @@ _LAZY = {
     "high_pass": "._filters",
     # roughness (ISO 4287, 4288, 25178-2)
     "profile_roughness": "._roughness", "areal_roughness": "._roughness",
-    "iso4288_cutoff": "._roughness",
+    "iso4288_cutoff": "._roughness", "roughness_profile": "._roughness",
     # ISO 25178-2 field parameters (height, hybrid, spatial, material ratio)
     "areal_parameters": "._areal", "areal_autocorrelation": "._areal",
     # spectra

@@ -25,7 +25,7 @@ import scipy.ndimage as ndi
 import scipy.sparse
 
 from .._random import stream
-from ..config import _check_bounds, from_mapping, load_toml, param, to_mapping
+from ..config import check_bounds, from_mapping, load_toml, param, to_mapping
 from ..errors import ConfigError
 from ._surface import Surface
 
@@ -193,7 +193,7 @@ class Interferometer:
                 object.__setattr__(self, f.name, value)
             elif tp is str and not isinstance(value, str):
                 raise ConfigError(f"{dotted}: expected str, got {type(value).__name__}")
-            _check_bounds(value, f.metadata, dotted)
+            check_bounds(value, f.metadata, dotted)
 
     # ------------------------------------------------------------- derived
     @property

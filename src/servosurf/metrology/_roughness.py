@@ -16,6 +16,7 @@ __all__ = [
     "ISO4288_CUTOFFS",
     "iso4288_cutoff",
     "profile_roughness",
+    "roughness_profile",
     "areal_roughness",
 ]
 
@@ -47,10 +48,35 @@ def _table_cutoff(value: float, uppers: tuple[float, ...]) -> float:
     return ISO4288_CUTOFFS[-1]
 
 
-def _roughness_profile(
-    profile: Profile, cutoff: float, trim_ends: bool, trim_length: float | None
+def roughness_profile(
+    profile: Profile, cutoff: float, trim_ends: bool = True,
+    trim_length: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Roughness profile (z - mean line) and the evaluation mask."""
+    """Roughness profile (z - Gaussian mean line) and its evaluation mask.
+
+    Parameters
+    ----------
+    profile : Profile
+        Heights in m.
+    cutoff : float
+        Cut-off wavelength lambda_c of the ISO 16610-21 mean line, in m.
+    trim_ends : bool, default: True
+        Leave out ``trim_length`` at each end (NaN).
+    trim_length : float, optional
+        Length left out at each end, in m (default: one cut-off).
+
+    Returns
+    -------
+    r : ndarray
+        The roughness profile, in m (NaN where not evaluated).
+    ok : ndarray of bool
+        Where ``r`` is finite.
+
+    Raises
+    ------
+    ConfigError
+        When nothing is left to evaluate.
+    """
     mean = gaussian_filter_1d(
         profile.z, profile.dx, cutoff, trim_ends=trim_ends, trim_length=trim_length
     )
@@ -192,7 +218,7 @@ def iso4288_cutoff(
     seen: list[float] = []
     for _ in range(_MAX_PASSES):
         seen.append(lc)
-        r, ok = _roughness_profile(profile, lc, trim_ends, trim_length)
+        r, ok = roughness_profile(profile, lc, trim_ends, trim_length)
         res = _evaluate(r, ok, profile.dx, lc)
         if periodic:
             value = res["rsm_m"]
@@ -306,7 +332,7 @@ def profile_roughness(
         rule = "given"
     if trim_length is None:
         trim_length = cutoff
-    r, ok = _roughness_profile(profile, cutoff, trim_ends, trim_length)
+    r, ok = roughness_profile(profile, cutoff, trim_ends, trim_length)
     out = _evaluate(r, ok, profile.dx, cutoff)
     out.update(
         cutoff_m=float(cutoff),

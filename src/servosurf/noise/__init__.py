@@ -10,6 +10,7 @@ from ._psd import (
     welch_psd,
     write_psd_csv,
 )
+from ._report import NoiseStudy, noise_study
 from ._spindle import psd_series, realise_spindle_axial
 from ._stream import BLOCK, VibrationStream
 from ._study import (
@@ -27,6 +28,8 @@ from ._study import (
 from ._synthesis import SOURCES, ErrorBudget, Realisation, cas, realise, synthesize
 
 __all__ = [
+    "noise_study",
+    "NoiseStudy",
     "PAPER_RECORD_LENGTH",
     "PAPER_RECORDS",
     "evaluate_psd",

@@ -11,7 +11,7 @@ import scipy as sp
 
 from .._validation import check_array, check_positive
 from ..errors import ConfigError
-from ..servo._machine import PSDModel
+from ..servo import PSDModel
 
 __all__ = [
     "evaluate_psd",
@@ -103,7 +103,7 @@ def read_psd_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
 
 def write_psd_csv(path: str | Path, freq: np.ndarray, psd: np.ndarray) -> None:
     """Write ``frequency_hz,psd`` CSV (Hz, unit^2/Hz) atomically."""
-    from ..commands._common import atomic_write
+    from .._atomic import atomic_write
 
     lines = ["frequency_hz,psd"] + [
         f"{f:.9g},{p:.9g}" for f, p in zip(freq, psd, strict=True)

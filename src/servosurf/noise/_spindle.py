@@ -12,16 +12,17 @@ from __future__ import annotations
 import numpy as np
 import scipy as sp
 
+from .._random import KEYS, keyed
 from .._validation import check_positive
 from ..errors import ConfigError
-from ..servo._machine import PSDModel, Spindle
+from ..servo import PSDModel, Spindle
 from ._psd import evaluate_psd
 
 __all__ = ["psd_series", "realise_spindle_axial", "SPINDLE_STREAM"]
 
 #: Second entropy word of the spindle's random stream: the axial error drawn for a
 #: seed is independent of the vibration realisation drawn for the same seed.
-SPINDLE_STREAM = 0x5B1D
+SPINDLE_STREAM = KEYS["spindle"]
 
 
 def psd_series(model: PSDModel, n: int, fs: float, *, rng: np.random.Generator,
@@ -86,5 +87,5 @@ def realise_spindle_axial(spindle: Spindle, n: int, fs: float, *,
     """
     if not isinstance(seed, int | np.integer) or seed < 0:
         raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
-    rng = np.random.default_rng([int(seed), SPINDLE_STREAM])
+    rng = keyed(seed, "spindle")  # default_rng([seed, SPINDLE_STREAM])
     return psd_series(spindle.axial_error, n, fs, rng=rng, fmin=spindle.fmin)

@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 import scipy as sp
 
+from .._random import block
 from ..errors import ConfigError
-from ..servo._loop import ServoLoop
+from ..servo import ServoLoop
 from ._synthesis import synthesize
 
 __all__ = ["VibrationStream", "BLOCK"]
@@ -79,7 +80,7 @@ class VibrationStream:
         w = np.empty((b1 - b0) * BLOCK)
         for b in range(b0, b1):
             k = (b - b0) * BLOCK
-            np.random.default_rng([self.seed, b]).standard_normal(out=w[k : k + BLOCK])
+            block(self.seed, b).standard_normal(out=w[k : k + BLOCK])
         return w
 
     def _spectrum(self, nfft: int) -> np.ndarray:

@@ -9,8 +9,7 @@ import numpy as np
 import scipy as sp
 
 from ..errors import ModelError
-from ..servo._loop import ServoLoop
-from ..servo._machine import Disturbances, Machine
+from ..servo import Disturbances, Machine, ServoLoop
 from ._psd import frequency_grid
 from ._synthesis import synthesize
 
@@ -310,7 +309,7 @@ def design_study(
         The grid, the refined optima (real and following) per mass, and the
         stability and tuning limits per mass.
     """
-    from ..scale._tasks import map_tasks
+    from .._tasks import map_tasks
 
     masses = np.atleast_1d(np.asarray(masses, dtype=float))
     bws = np.atleast_1d(np.asarray(bandwidths, dtype=float))

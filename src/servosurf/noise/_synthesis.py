@@ -7,10 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy as sp
 
+from .._random import root
 from .._validation import check_positive
 from ..errors import ConfigError
-from ..servo._loop import ServoLoop
-from ..servo._machine import Disturbances
+from ..servo import Disturbances, ServoLoop
 from ._psd import evaluate_psd, frequency_grid
 
 __all__ = [
@@ -233,7 +233,7 @@ def realise(
     fs = loop.fs
     fmin = fs / 4096 if fmin is None else check_positive(fmin, name="fmin")
     d = disturbances if disturbances is not None else loop.machine.disturbances
-    rng = np.random.default_rng(seed)
+    rng = root(seed)  # the root stream (servosurf._random)
     m = sp.fft.next_fast_len(int(n), real=True)
     f = np.fft.rfftfreq(m, 1.0 / fs)
     # the band fmin <= f < fs/2 is a contiguous slice of the rfft bins
@@ -272,9 +272,9 @@ def realise(
         tool[band] += path((inp, "tool")) * xb
         fol[band] += path((inp, "following_error")) * xb
         if bypass is not None and inp == "base":
-            from ..servo._loop import _double_pole
+            from ..servo import double_pole
 
-            hs = _double_pole(2j * np.pi * fb, loop.machine.sensor.corner)
+            hs = double_pole(2j * np.pi * fb, loop.machine.sensor.corner)
             bypass[band] = path(("sensor_noise", "tool")) * (-hs * xb)
     return Realisation(
         fs=fs,

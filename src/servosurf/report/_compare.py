@@ -7,7 +7,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..metrology._surface import Surface
+from ..metrology import Surface
+from ._analysis import MapComparison
 
 __all__ = ["compare_surfaces", "PEAK_MATCH_RTOL"]
 
@@ -51,7 +52,7 @@ def compare_surfaces(
     axis: int = 0,
     register: bool = True,
     per_lenslet: bool = True,
-) -> dict[str, Any]:
+) -> MapComparison:
     """Bring two maps onto one grid, register them and report their difference.
 
     Parameters
@@ -71,14 +72,16 @@ def compare_surfaces(
 
     Returns
     -------
-    dict
-        ``shift_m`` ([dy, dx] applied to the simulated map, m), ``lenslet_shifts``,
+    MapComparison
+        ``.summary`` / ``.to_dict()``: ``shift_m`` ([dy, dx] applied to the
+        simulated map, m), ``lenslet_shifts``,
         ``rms_residual_m``, ``pv_residual_m``, ``fit_percent`` (MATLAB-style
         ``100 (1 - ||residual|| / ||measured - mean||)`` with the removed form
         terms), ``correlation``, ``peaks_measured``,
         ``peaks_simulated`` and ``peaks_matched`` (1/m), ``areal`` (the ISO 25178-2
         parameters of :func:`~servosurf.metrology.areal_parameters` of each map
-        side by side, see Notes), plus arrays for plotting under ``_plots``.
+        side by side, see Notes); ``.plot_data``: the registered maps, the
+        residual and the spectra; ``.plot(folder)`` writes the figures.
 
     Notes
     -----
@@ -179,7 +182,7 @@ def compare_surfaces(
         + (" ".join(remove) if remove else "mean height")
         + "; no S- or L-filter"
     )
-    return {
+    summary = {
         "pixel_m": [m.dy, m.dx],
         "shape": list(m.shape),
         "shift_m": list(shift),
@@ -194,10 +197,10 @@ def compare_surfaces(
         "peaks_simulated_per_m": pk_s,
         "peaks_matched_per_m": matched,
         "areal": areal,
-        "_plots": {
-            "measured": m,
-            "simulated": s,
-            "residual": res,
-            "spectra": (fm, pm, fs_, ps),
-        },
     }
+    return MapComparison(summary=summary, plot_data={
+        "measured": m,
+        "simulated": s,
+        "residual": res,
+        "spectra": (fm, pm, fs_, ps),
+    })

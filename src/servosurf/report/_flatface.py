@@ -23,6 +23,7 @@ import numpy as np
 
 from .._parts import LOOP_PARTS, MATERIAL_PARTS, OUTSIDE_PARTS
 from ..errors import ConfigError
+from ..run import preset
 from ._simulation import FLAT_RA_DEFINITION, flat_face_ra
 
 __all__ = ["flat_face_budget", "FlatFaceBudget", "FlatFaceModel", "BUDGET_STEPS",
@@ -68,10 +69,11 @@ class FlatFaceModel:
         Machine (default: the seed prototype).
     workpiece : Workpiece, str or Path, optional
         Workpiece (default: electroless NiP).
-    bandwidth : float, default: 1448.0
-        Crossover bandwidth in Hz (the paper's cutting set-up, section 5.3).
-    mass : float, default: 0.175
-        Moving mass in kg (the paper's cutting set-up).
+    bandwidth : float, optional
+        Crossover bandwidth in Hz (default: the ``paper-cutting`` preset's, 1448 Hz,
+        the paper's cutting set-up, section 5.3).
+    mass : float, optional
+        Moving mass in kg (default: the ``paper-cutting`` preset's, 0.175 kg).
     seed : int, default: 0
         Seed of the vibration realisation and the spindle error.
     sensor_target : {"metrology-frame", "fts-base"} or None, default: None
@@ -84,12 +86,12 @@ class FlatFaceModel:
     """
 
     def __init__(self, toolpath, *, machine=None, workpiece=None,
-                 bandwidth: float = 1448.0, mass: float = 0.175, seed: int = 0,
-                 sensor_target: str | None = None,
+                 bandwidth: float | None = None, mass: float | None = None,
+                 seed: int = 0, sensor_target: str | None = None,
                  deviation_parts: Sequence[str] = LOOP_PARTS + OUTSIDE_PARTS,
                  n_threads: int | None = None) -> None:
-        from ..cutting._force import Workpiece, load_workpiece
-        from ..servo._machine import Machine, load_machine
+        from ..cutting import Workpiece, load_workpiece
+        from ..servo import Machine, load_machine
         from ..simulation import simulate
         from ..toolpath import ToolpathSpec, load_toolpath
 
@@ -118,6 +120,9 @@ class FlatFaceModel:
         self.spec = spec
         self.machine = machine
         self.workpiece = workpiece
+        cut = preset("paper-cutting")
+        bandwidth = cut.bandwidth if bandwidth is None else bandwidth
+        mass = cut.mass if mass is None else mass
         self.kw = {"bandwidth": float(bandwidth), "mass": float(mass),
                    "seed": int(seed), "n_threads": n_threads}
         full = simulate(spec, machine=machine, workpiece=workpiece,
@@ -218,8 +223,8 @@ class FlatFaceBudget:
 
 
 def flat_face_budget(toolpath: str | Path, *, machine=None, workpiece=None,
-                     bandwidth: float = 1448.0, mass: float = 0.175, seed: int = 0,
-                     sensor_target: str | None = "fts-base",
+                     bandwidth: float | None = None, mass: float | None = None,
+                     seed: int = 0, sensor_target: str | None = "fts-base",
                      instrument: str | None = "cp300-20x",
                      steps: Sequence[tuple[str, Sequence[str]]] = BUDGET_STEPS,
                      n_threads: int | None = None) -> FlatFaceBudget:
@@ -232,10 +237,11 @@ def flat_face_budget(toolpath: str | Path, *, machine=None, workpiece=None,
         cut).
     machine, workpiece : optional
         As for :func:`~servosurf.simulation.simulate`.
-    bandwidth : float, default: 1448.0
-        Crossover bandwidth in Hz (the paper cut at 1448 Hz with 0.175 kg).
-    mass : float, default: 0.175
-        Moving mass in kg.
+    bandwidth : float, optional
+        Crossover bandwidth in Hz (default: the ``paper-cutting`` preset's: the
+        paper cut at 1448 Hz with 0.175 kg).
+    mass : float, optional
+        Moving mass in kg (default: the ``paper-cutting`` preset's).
     seed : int, default: 0
         Seed of the vibration realisation, the spindle error and the instrument.
     sensor_target : str or None, default: "fts-base"
@@ -259,8 +265,11 @@ def flat_face_budget(toolpath: str | Path, *, machine=None, workpiece=None,
     ConfigError
         On a toolpath that is not a facing cut, or unknown parts.
     """
-    from ..metrology._interferometer import load_instrument, measure
+    from ..metrology import load_instrument, measure
 
+    cut = preset("paper-cutting")
+    bandwidth = cut.bandwidth if bandwidth is None else bandwidth
+    mass = cut.mass if mass is None else mass
     dev_parts = tuple(p for p in LOOP_PARTS + OUTSIDE_PARTS
                       if any(p in parts for _, parts in steps))
     model = FlatFaceModel(toolpath, machine=machine, workpiece=workpiece,

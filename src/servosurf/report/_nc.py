@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ..metrology._surface import Profile, Surface
+from ..metrology import Profile, Surface
+from ._analysis import SimulationAnalysis
 
 __all__ = ["analyse_nc", "centre_profile"]
 
@@ -93,7 +94,7 @@ def centre_profile(surface: Surface, path, *,
 
 
 def analyse_nc(result, *, profile_length: float | None = None,
-               use_measured: bool = True) -> dict[str, Any]:
+               use_measured: bool = True) -> SimulationAnalysis:
     """Roughness of the centre profile and toolpath figures of an NC run.
 
     Parameters
@@ -107,12 +108,13 @@ def analyse_nc(result, *, profile_length: float | None = None,
 
     Returns
     -------
-    dict
-        JSON-ready SI values: ``roughness`` (``ra_m``, ``rq_m``, ``rz_m``,
-        ``rsm_m``, ``cutoff_m``, ...), ``centre_profile`` (row, length),
-        ``toolpath`` (revolutions, feed per revolution, time base, reference,
-        rotation), ``ra_m``/``sa_m``/``sq_m`` (for study tables), and ``_plots``
-        (arrays for the figures, not JSON).
+    SimulationAnalysis
+        ``.summary`` / ``.to_dict()``: JSON-ready SI values: ``roughness``
+        (``ra_m``, ``rq_m``, ``rz_m``, ``rsm_m``, ``cutoff_m``, ...),
+        ``centre_profile`` (row, length), ``toolpath`` (revolutions, feed per
+        revolution, time base, reference, rotation), ``ra_m``/``sa_m``/``sq_m``
+        (for study tables); ``.plot_data``: the centre profile, the feed and the
+        roughness the figures draw; ``.plot(folder)`` writes them.
     """
     from ..metrology import profile_roughness
 
@@ -174,9 +176,9 @@ def analyse_nc(result, *, profile_length: float | None = None,
         "form_error_max_m": None,
         "spectrum_peaks_per_m": [],
     }
-    out["_plots"] = {
+    plots = {
         "profile": prof,
         "feed": (r_f, feed),
         "roughness": rough,
     }
-    return out
+    return SimulationAnalysis(summary=out, result=result, plot_data=plots)

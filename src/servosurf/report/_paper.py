@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from ..run import preset
+
 __all__ = ["Row", "row_group", "paper_table", "GROUPS", "ROLES", "figure_row"]
 
 #: Roles of a row.
@@ -421,7 +423,8 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
             ctx,
             "stability_limit",
             lim.bandwidth_hz if lim.kind == "unstable" else float("nan"),
-            setup=f"tuned PIDF, 60 deg margin, 0.175 kg; the limit is {lim.kind}",
+            setup=f"tuned PIDF, 60 deg margin, {HEAVY_MASS:g} kg; the limit is "
+            f"{lim.kind}",
         )
     )
     loop = ServoLoop(heavy.with_bandwidth(FIG13C_BANDWIDTH))
@@ -440,22 +443,25 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
         if m["kind"] == "unstable":
             cp = m["critical_pole"]
             notes.append(
-                f"Added mass on {m['added_mass_on']}: the 0.175 kg loop goes unstable "
+                f"Added mass on {m['added_mass_on']}: the {HEAVY_MASS:g} kg loop goes "
+                "unstable "
                 f"at a {m['limit_hz']:.0f} Hz crossover; the pole leaving the unit "
                 f"circle is at {cp['frequency_hz'] / 1e3:.2f} kHz, the {cp['mode']}. "
-                f"Gain margin at 1448 Hz: {m['gain_margin_db_at_1448']:.1f} dB."
+                f"Gain margin at {FIG13C_BANDWIDTH:g} Hz: "
+                f"{m['gain_margin_db_at_1448']:.1f} dB."
             )
         else:
             notes.append(
                 f"Added mass on {m['added_mass_on']}: no instability; the tuning rule "
                 f"has no positive PIDF gains from a {m['limit_hz']:.0f} Hz crossover "
                 f"({m['kind']}: a tuning failure, not an instability). Gain margin at "
-                f"1448 Hz: {m['gain_margin_db_at_1448']:.1f} dB."
+                f"{FIG13C_BANDWIDTH:g} Hz: {m['gain_margin_db_at_1448']:.1f} dB."
             )
-    light = loop_limit(machine.with_moving_mass(0.075))
+    opt_light, opt_heavy = preset("paper-optimum-light"), preset("paper-optimum-heavy")
+    light = loop_limit(machine.with_moving_mass(opt_light.mass))
     notes.append(
-        f"At 0.075 kg the loop limit is {light.bandwidth_hz:.0f} Hz and of kind "
-        f"'{light.kind}'"
+        f"At {opt_light.mass:g} kg the loop limit is {light.bandwidth_hz:.0f} Hz and "
+        f"of kind '{light.kind}'"
         + (" (no positive PIDF gains: a tuning failure, not an instability)."
            if light.kind == "untunable" else ".")
     )
@@ -464,7 +470,7 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     psd = _disturbance_psds(machine.disturbances, bank.bank.freq)
     vals = bank_figures(bank, psd, reading="crossover")
     opt = {}
-    for mass, tag in ((0.075, "0075"), (0.175, "0175")):
+    for mass, tag in ((opt_light.mass, "0075"), (HEAVY_MASS, "0175")):
         m = machine.with_moving_mass(mass)
         for which in ("following", "real"):
             opt[f"optimum_{which}_{tag}"] = optimal_bandwidth(m, which=which)[0]
@@ -473,7 +479,7 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     rows.append(figure_row(ctx, "following_rms_468", vals["following_rms_468"]))
     rows.append(figure_row(ctx, "real_rms_468_s52", vals["real_rms_468_s52"]))
     rows.append(figure_row(ctx, "sensor_noise_rms", vals["sensor_noise_rms"]))
-    loop468 = ServoLoop(heavy.with_bandwidth(468.0))
+    loop468 = ServoLoop(heavy.with_bandwidth(opt_heavy.bandwidth))
     rows.append(figure_row(ctx, "following_pp_468", following_peak_to_peak(loop468)))
     for k in ("real_rms_0075_s33", "real_rms_0175_s33"):
         rows.append(figure_row(ctx, k, vals[k], note=_NOTES[k]))
@@ -501,13 +507,15 @@ def servo_rows(ctx: dict) -> tuple[list[Row], list[str]]:
         f"numbers `servosurf noise` reports for the '{machine.disturbances.name}' "
         "disturbances."
     )
-    for b in (468.0, 874.0, FIG13C_BANDWIDTH):
+    for b in (opt_heavy.bandwidth, opt_light.bandwidth, FIG13C_BANDWIDTH):
         m3 = ServoLoop(heavy.with_bandwidth(b)).margins()["bandwidth_3db_hz"]
-        notes.append(f"{b:g} Hz crossover (0.175 kg) = {m3:.0f} Hz closed-loop -3 dB.")
+        notes.append(f"{b:g} Hz crossover ({HEAVY_MASS:g} kg) = {m3:.0f} Hz "
+                     "closed-loop -3 dB.")
     x3 = bank.crossover_for_3db
     notes.append(
         "Section 3.3 states its 468 Hz as a closed-loop -3 dB bandwidth: that is a "
-        f"{x3[0]:.0f} Hz (0.075 kg) / {x3[1]:.0f} Hz (0.175 kg) crossover; the rows "
+        f"{x3[0]:.0f} Hz ({opt_light.mass:g} kg) / {x3[1]:.0f} Hz ({HEAVY_MASS:g} kg) "
+        "crossover; the rows "
         "read it as a crossover, the cross-prediction table gives both readings."
     )
     return rows, notes
@@ -521,6 +529,7 @@ def cut_rows(ctx: dict) -> tuple[list[Row], list[str]]:
     from ..cutting import Material
 
     machine = ctx["machine"]
+    cut = preset("paper-cutting")
     kt = Material().specific_thrust_pressure
     gap = overshoot_gap(machine, kt)
     ctx.setdefault("mechanisms", {})["overshoot"] = gap
@@ -562,7 +571,8 @@ def cut_rows(ctx: dict) -> tuple[list[Row], list[str]]:
         ),
     ]
     notes = [
-        f"5 um cut (1448 Hz, 0.175 kg, k_t {kt / 1e9:.3f} GPa): the force-driven "
+        f"5 um cut ({cut.bandwidth:g} Hz, {cut.mass:g} kg, k_t {kt / 1e9:.3f} GPa): "
+        "the force-driven "
         f"deviation peaks {gap['deviation_lag_deepest_s'] * 1e3:.3f} ms after the "
         f"deepest commanded point and {gap['deviation_lag_s'] * 1e3:.3f} ms after the "
         "force peak (sample-exact, no registration; the paper's 12 deg at 100 Hz "
@@ -605,8 +615,11 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
         return [], ["surface rows skipped: toolpaths/ folder not found"]
     machine = ctx["machine"]
     seeds = list(range(ctx.get("seeds", 24)))
-    setup = f"1448 Hz crossover, 0.175 kg, mean of {len(seeds)} seeds"
-    kw = {"machine": machine, "bandwidth": 1448.0, "mass": 0.175}
+    # the paper's cutting set-up; the rows analyse the machined map (no instrument)
+    cut = preset("paper-cutting").replace(machine=machine, instrument=None)
+    setup = (f"{cut.bandwidth:g} Hz crossover, {cut.mass:g} kg, mean of {len(seeds)} "
+             "seeds")
+    kw = {"run": cut}
     rows: list[Row] = []
     notes: list[str] = []
     surfaces: dict[str, Any] = {}
@@ -676,7 +689,8 @@ def surface_rows(ctx: dict) -> tuple[list[Row], list[str]]:
             "air_cut_ratio",
             ratio,
             role="check",
-            setup="|T(100 Hz)| reference -> tool at 1448 Hz, 0.175 kg (the "
+            setup=f"|T(100 Hz)| reference -> tool at {cut.bandwidth:g} Hz, "
+            f"{cut.mass:g} kg (the "
             "calibration targets reference -> sensor)",
         )
     )

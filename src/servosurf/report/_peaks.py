@@ -101,7 +101,7 @@ def lenslet_peak_study(
     first = None
     for seed in it:
         res = simulate(spec, seed=seed, **kwargs)
-        a = analyse(res)
+        a = analyse(res).summary
         freq, psd, used = lenslet_spectrum(res.surface, blocks=blocks)
         if blocks is None:
             blocks, first = used, (res, a)

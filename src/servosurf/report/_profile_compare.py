@@ -70,7 +70,7 @@ import numpy as np
 
 from .._validation import check_positive
 from ..errors import ConfigError
-from ..metrology._surface import Profile, Surface
+from ..metrology import Profile, Surface
 
 __all__ = [
     "ProfileComparison",
@@ -114,7 +114,7 @@ def as_profile_or_none(obj: Surface | Profile) -> Profile | None:
     if isinstance(obj, Profile):
         return obj
     if isinstance(obj, Surface) and 1 in obj.shape and obj.z.size >= 2:
-        from ..metrology._profile import profile_through
+        from ..metrology import profile_through
 
         return profile_through(obj)
     return None
@@ -263,7 +263,7 @@ class ProfileComparison:
         dict of str to Path
             ``{"profiles": ..., "roughness": ..., "spectra": ...}``.
         """
-        from ..viz._profile_plots import (
+        from ..viz import (
             plot_profile_overlay,
             plot_profile_spectra,
             plot_profile_table,
@@ -279,7 +279,7 @@ class ProfileComparison:
 
 def _line_of(obj: Surface | Profile, axis: str, at: float | None,
              name: str) -> Profile:
-    from ..metrology._profile import profile_through
+    from ..metrology import profile_through
 
     if not isinstance(obj, Surface | Profile):
         raise ConfigError(
@@ -400,7 +400,7 @@ def _register_halves(rm: Profile, rs: Profile, mirrored: bool, axis: float,
     window``. ``score`` is the length-weighted correlation of the registered
     halves; None when no half could be registered.
     """
-    from ..metrology._profile import register_profiles
+    from ..metrology import register_profiles
 
     sign = -1.0 if mirrored else 1.0
     out: dict[str, Any] = {}
@@ -460,7 +460,7 @@ def _split_search(m: Profile, rm: Profile, rs: Profile, lc: float,
     windows); the best score wins, ``score_other`` is the best of the other
     orientation. None when no candidate registers.
     """
-    from ..metrology._roughness import profile_roughness
+    from ..metrology import profile_roughness
 
     try:
         rsm = profile_roughness(m, cutoff=lc, trim_ends=False)["rsm_m"]
@@ -516,11 +516,10 @@ def _register_common(
     ``split``: register the halves either side of the simulated x = 0 separately
     when the measured profile covers both (see the module docstring).
     """
-    from ..metrology._profile import register_profiles, resample_profile
-    from ..metrology._roughness import _roughness_profile
+    from ..metrology import register_profiles, resample_profile, roughness_profile
 
     def rough(p: Profile) -> Profile:
-        r, _ = _roughness_profile(remove_profile_form(p, form), lc, False, None)
+        r, _ = roughness_profile(remove_profile_form(p, form), lc, False, None)
         return Profile(_winsorize(r), p.dx, x0=p.x0)
 
     halves = None
@@ -685,13 +684,15 @@ def compare_profiles(
     >>> round(res.shift * 1e3, 6), round(res.correlation, 6)
     (1.0, 1.0)
     """
-    from ..metrology._profile import crop_profile, resample_profile, trim_invalid_ends
-    from ..metrology._roughness import (
-        _roughness_profile,
+    from ..metrology import (
+        crop_profile,
         iso4288_cutoff,
         profile_roughness,
+        psd_1d,
+        resample_profile,
+        roughness_profile,
+        trim_invalid_ends,
     )
-    from ..metrology._spectrum import psd_1d
 
     if len(labels) != 2 or not all(isinstance(v, str) for v in labels):
         raise ConfigError(f"labels must be two strings, got {labels!r}")
@@ -755,8 +756,8 @@ def compare_profiles(
     res_m = profile_roughness(pm, cutoff=lc, trim_ends=trim_ends, trim_length=trim)
     res_s = profile_roughness(ps, cutoff=lc, trim_ends=trim_ends, trim_length=trim)
     res_m["cutoff_rule"] = res_s["cutoff_rule"] = rule
-    rm, _ = _roughness_profile(pm, lc, trim_ends, trim)
-    rs, _ = _roughness_profile(ps, lc, trim_ends, trim)
+    rm, _ = roughness_profile(pm, lc, trim_ends, trim)
+    rs, _ = roughness_profile(ps, lc, trim_ends, trim)
     both = np.isfinite(rm) & np.isfinite(rs)
     if both.sum() >= 3 and rm[both].std() > 0 and rs[both].std() > 0:
         corr = float(np.corrcoef(rm[both], rs[both])[0, 1])

@@ -47,10 +47,12 @@ from typing import Any
 
 import numpy as np
 
-from ..metrology._surface import Profile, Surface
+from ..metrology import Profile, Surface
+from ._analysis import SimulationAnalysis
 
 __all__ = [
     "analyse",
+    "SimulationAnalysis",
     "flat_face_ra",
     "FLAT_RA_DEFINITION",
     "lenslet_spectrum",
@@ -67,6 +69,8 @@ __all__ = [
 HIGH_PASS_CUTOFF = 1.0 / 80e3
 #: Lowest spatial frequency searched for spectral peaks, in 1/m.
 PEAK_FMIN = 80e3
+#: The constants the figures of an analysis name.
+FIGURE_CONSTANTS = {"highpass_cutoff_m": HIGH_PASS_CUTOFF, "peak_fmin_per_m": PEAK_FMIN}
 #: The paper's form reference: the air-cut amplitude 5.2 um for a nominal 5 um
 #: (section 5.3), as a ratio to the nominal amplitude.
 PAPER_AIR_CUT_RATIO = 5.2 / 5.0
@@ -285,7 +289,8 @@ def commanded_centre(result, x_m: float, y_m: float) -> float:
     return float(y[i])
 
 
-def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
+def _lenslet(surface: Surface, result, out: dict[str, Any]
+             ) -> tuple[dict[str, Any], dict[str, Any]]:
     from ..metrology import (
         find_peaks_spectrum,
         form_error_profile,
@@ -294,7 +299,7 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         nominal_lenslet_profile,
         nominal_lenslet_surface,
     )
-    from ..servo._loop import ServoLoop
+    from ..servo import ServoLoop
 
     p = result.spec.path
     fld = result.spec.field
@@ -422,19 +427,19 @@ def _lenslet(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         roughness_definition="80 mm^-1 high-passed map inside the lenslet (Ra: centre "
         "profile along the cut)",
     )
-    out["_plots"] = {
+    plots = {
         "profile": (y, prof.z, fe),
         "highpass": hp,
         "form_error_map": err_map,
         "spectrum": (freq, psd, peaks),
     }
-    return out
+    return out, plots
 
 
 def _flat(surface: Surface, result, out: dict[str, Any],
-          ra_of: Surface | None = None) -> dict[str, Any]:
-    """Flat-face summary; ``ra_of``: the map whose Ra is reported instead of the
-    machined map's (a design surface's form-error map)."""
+          ra_of: Surface | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Flat-face summary and figure data; ``ra_of``: the map whose Ra is reported
+    instead of the machined map's (a design surface's form-error map)."""
     from ..metrology import find_peaks_spectrum, high_pass, psd_1d
 
     lev = surface.level()
@@ -455,17 +460,17 @@ def _flat(surface: Surface, result, out: dict[str, Any],
         roughness_definition=FLAT_RA_DEFINITION + "; sa_m, sq_m, sz_m: of the "
         "analysed map, unfiltered about the least-squares plane",
     )
-    out["_plots"] = {"highpass": hp, "spectrum": (freq, psd, peaks)}
-    return out
+    return out, {"highpass": hp, "spectrum": (freq, psd, peaks)}
 
 
-def _design(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
+def _design(surface: Surface, result, out: dict[str, Any]
+            ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Form error against the design; roughness and spectrum of the error map."""
     from ..metrology import form_error_against_design
 
     path = result.spec.path
     fe = form_error_against_design(surface, path, best_fit_sphere=True)
-    out = _flat(fe.error, result, out, ra_of=fe.error)
+    out, plots = _flat(fe.error, result, out, ra_of=fe.error)
     err = fe.error.z[np.isfinite(fe.error.z)]
     fld = result.spec.field
     xs = np.linspace(fld.bounds[0], fld.bounds[1], 3)
@@ -485,11 +490,11 @@ def _design(surface: Surface, result, out: dict[str, Any]) -> dict[str, Any]:
         "and tilt), unfiltered about its least-squares plane (Ra as the flat-face "
         "Ra, of the form-error map)",
     )
-    out["_plots"]["form_error"] = fe
-    return out
+    plots["form_error"] = fe
+    return out, plots
 
 
-def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
+def analyse(result, *, use_measured: bool = True) -> SimulationAnalysis:
     """Metrology summary of a :class:`~servosurf.simulation.SimulationResult`.
 
     Parameters
@@ -501,14 +506,20 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
 
     Returns
     -------
-    dict
-        SI values: ``form_error_max_m``, ``form_error_lag_m`` (lenslets),
-        ``form_error_pv_m``, ``form_error_rms_m`` and their ``_bfs`` variants
-        (design surfaces, against the design after piston and tilt),
-        ``spectrum_peaks_per_m`` (strongest first), ``ra_m``, ``sa_m``, ``sq_m``,
-        deviation statistics (``deviation_max_m``, ``deviation_overshoot_m``,
-        ``deviation_lag_s``, ``force_max_n``) and ``_plots`` data (not JSON).
+    SimulationAnalysis
+        ``.summary`` / ``.to_dict()``: SI values: ``form_error_max_m``,
+        ``form_error_lag_m`` (lenslets), ``form_error_pv_m``, ``form_error_rms_m``
+        and their ``_bfs`` variants (design surfaces, against the design after
+        piston and tilt), ``spectrum_peaks_per_m`` (strongest first), ``ra_m``,
+        ``sa_m``, ``sq_m``, deviation statistics (``deviation_max_m``,
+        ``deviation_overshoot_m``, ``deviation_lag_s``, ``force_max_n``);
+        ``.plot_data``: the arrays of the figures; ``.plot(folder)`` writes them.
+        An NC program's run is analysed by :func:`~servosurf.report.analyse_nc`.
     """
+    if result.spec.kind == "nc":
+        from ._nc import analyse_nc
+
+        return analyse_nc(result, use_measured=use_measured)
     surface = (
         result.measured
         if (use_measured and result.measured is not None)
@@ -517,16 +528,15 @@ def analyse(result, *, use_measured: bool = True) -> dict[str, Any]:
     out: dict[str, Any] = {
         "analysed_map": "measured" if surface is result.measured else "model"
     }
-    if result.spec.kind == "nc":
-        from ._nc import analyse_nc
-
-        return analyse_nc(result, use_measured=use_measured)
     out.update(_deviation_stats(result))
     if result.spec.kind == "lenslet":
-        return _lenslet(surface, result, out)
-    if result.spec.kind == "surface":
-        return _design(surface, result, out)
-    return _flat(surface, result, out)
+        out, plots = _lenslet(surface, result, out)
+    elif result.spec.kind == "surface":
+        out, plots = _design(surface, result, out)
+    else:
+        out, plots = _flat(surface, result, out)
+    return SimulationAnalysis(summary=out, result=result, plot_data=plots,
+                              constants=FIGURE_CONSTANTS)
 
 
 def profile_of(surface: Surface, axis: int) -> Profile:

@@ -6,7 +6,10 @@ zarr is a dependency (the face's output array); dask (``distributed``, the
 
 from __future__ import annotations
 
+from .._defaults import reuse_freed_memory
+from .._tasks import map_tasks
 from ._face import (
+    MAX_TILE_SAMPLES,
     FaceResult,
     IndexNoise,
     chunk_slices,
@@ -16,11 +19,14 @@ from ._face import (
     grid_attributes,
     simulate_face,
 )
-from ._memory import reuse_freed_memory
-from ._tasks import map_tasks
+from ._run import FaceRun, face_toolpath, simulate_face_run
 from ._vibration import MemmapDeviation, write_vibration
 
 __all__ = [
+    "simulate_face_run",
+    "face_toolpath",
+    "FaceRun",
+    "MAX_TILE_SAMPLES",
     "simulate_face",
     "compute_tile",
     "face_field",

@@ -20,14 +20,21 @@ from typing import Any
 
 import numpy as np
 
+from .._defaults import malloc_reuse, numba_threads
 from .._progress import bar
 from .._validation import check_no_kwargs, check_positive
 from ..errors import ConfigError
-from ..toolpath._paths import ToolpathSpec
-from ..toolpath._sample import SampledPath, count_samples, field_reach, sample
-from ..toolpath._sweep import _threads, prepare_path, run_kernel
-from ..toolpath._tool import Field
-from ._memory import reuse_freed_memory
+from ..toolpath import (
+    FS_DEFAULT,
+    Field,
+    SampledPath,
+    ToolpathSpec,
+    count_samples,
+    field_reach,
+    prepare_path,
+    run_kernel,
+    sample,
+)
 
 __all__ = ["face_field", "simulate_face", "compute_tile", "FaceResult", "chunk_slices",
            "IndexNoise", "face_preview", "grid_attributes"]
@@ -171,8 +178,6 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
         ``n_samples`` (samples generated), ``n_points`` (pixels computed),
         ``n_subtiles`` (time windows).
     """
-    from ..toolpath._sample import FS_DEFAULT
-
     fs = FS_DEFAULT if fs is None else fs
     out = _initial_tile(field, rows, cols, initial, face_radius)
     stats = {"n_samples": 0, "n_points": int(np.isfinite(out).sum()) if out.size else 0,
@@ -203,7 +208,7 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
             windows = [(float(a), float(b)) for a, b in zip(edges[:-1], edges[1:],
                                                            strict=True)]
     # every parallel stage of the tile (sampling, interleave, kernel) uses n_threads
-    with _threads(n_threads):
+    with numba_threads(n_threads):
         for win in windows:
             cap = max(2 * max_tile_samples, n if win is None else 0, 1)
             path = sample(spec, fs=fs, field=sf, reach=reach, t_window=win,
@@ -250,11 +255,11 @@ def _write(arr, rows, cols, z) -> None:
 
 def _chunk_task(spec, field, rows, cols, store, kwargs):
     """Dask task: compute one chunk and write it into the Zarr store at ``store``."""
-    reuse_freed_memory()
     t0 = time.perf_counter()
-    z, stats = compute_tile(spec, field, rows, cols, **kwargs)
-    arr = _open_array(store, None, None, "r+")
-    arr[rows[0]:rows[1], cols[0]:cols[1]] = z
+    with malloc_reuse():
+        z, stats = compute_tile(spec, field, rows, cols, **kwargs)
+        arr = _open_array(store, None, None, "r+")
+        arr[rows[0]:rows[1], cols[0]:cols[1]] = z
     stats["seconds"] = time.perf_counter() - t0
     return stats
 
@@ -349,7 +354,8 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
     -----
     Peak memory is one chunk of output plus one windowed path (at most
     ``max_tile_samples`` samples, about 50 bytes each while sampling) per worker.
-    The run calls :func:`reuse_freed_memory` (glibc heap thresholds) in each process
+    The run raises glibc's heap thresholds while its tiles run
+    (:func:`servosurf._defaults.malloc_reuse`, in this process and in each dask task)
     so that tile buffers are reused instead of page-faulted in again.
     """
     check_no_kwargs(kwargs, name="simulate_face")
@@ -364,7 +370,17 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
     if isinstance(store, Path):
         store = str(store)
     t0 = time.perf_counter()
-    reuse_freed_memory()
+    with malloc_reuse():
+        arr, n_points, n_samples, n_tasks = _run_tiles(
+            spec, store, field, face_radius, chunk, initial, deviation, depth_margin,
+            fs, client, n_threads, max_tile_samples)
+    return FaceResult(array=arr, field=field, seconds=time.perf_counter() - t0,
+                      n_points=n_points, n_samples=n_samples, n_tasks=n_tasks)
+
+
+def _run_tiles(spec, store, field, face_radius, chunk, initial, deviation,
+               depth_margin, fs, client, n_threads, max_tile_samples):
+    """The tile loop of :func:`simulate_face`: (array, points, samples, tasks)."""
     arr = _open_array(store, field.shape, chunk, "w")
     arr.attrs.update(grid_attributes(field, face_radius=face_radius, kind=spec.kind))
     tasks = chunk_slices(field.shape, chunk)
@@ -405,8 +421,7 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
         finally:
             if own:
                 cl.close()
-    return FaceResult(array=arr, field=field, seconds=time.perf_counter() - t0,
-                      n_points=n_points, n_samples=n_samples, n_tasks=len(tasks))
+    return arr, n_points, n_samples, len(tasks)
 
 
 def grid_attributes(field: Field, *, face_radius: float | None = None,

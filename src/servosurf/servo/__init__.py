@@ -12,7 +12,7 @@ from ._ident import (
     set_param,
     write_frf_csv,
 )
-from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, tune_pidf
+from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, double_pole, tune_pidf
 from ._machine import (
     PROVENANCE_KINDS,
     Actuator,
@@ -36,6 +36,7 @@ from ._perturb import (
 from ._plant import Plant, paper_eq_frf, plant_from_machine
 
 __all__ = [
+    "double_pole",
     "AxisModel",
     "AXIS_MODELS",
     "PROVENANCE_KINDS",

@@ -85,7 +85,7 @@ def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
 
 def write_frf_csv(path: str | Path, freq: np.ndarray, frf: np.ndarray) -> None:
     """Write ``frequency_hz,real,imag`` CSV atomically."""
-    from ..commands._common import atomic_write
+    from .._atomic import atomic_write
 
     lines = ["frequency_hz,real,imag"] + [
         f"{f:.10g},{h.real:.10g},{h.imag:.10g}" for f, h in zip(freq, frf, strict=True)

@@ -58,7 +58,7 @@ from ._perturb import (
 )
 from ._plant import Plant, plant_from_machine
 
-__all__ = ["PIDF", "ServoLoop", "tune_pidf", "LoopFRF", "PATHS"]
+__all__ = ["PIDF", "ServoLoop", "tune_pidf", "LoopFRF", "PATHS", "double_pole"]
 
 
 #: Disturbance inputs of the closed loop.
@@ -126,7 +126,21 @@ class PIDF:
         return ad, bd, cd, dd
 
 
-def _double_pole(s: np.ndarray, w: float) -> np.ndarray:
+def double_pole(s: np.ndarray, w: float) -> np.ndarray:
+    """The unit-gain double real pole ``w^2 / (s + w)^2`` (amplifier, sensor).
+
+    Parameters
+    ----------
+    s : ndarray
+        Laplace variable, in rad/s (``2j pi f``).
+    w : float
+        Corner angular frequency, in rad/s.
+
+    Returns
+    -------
+    ndarray
+        The response, dimensionless.
+    """
     return w**2 / (s + w) ** 2
 
 
@@ -192,8 +206,8 @@ def loop_elements(
     """
     s = 2j * np.pi * np.asarray(freq, dtype=float)
     t = 1.0 / machine.controller.sample_rate
-    amp = machine.actuator.current_gain * _double_pole(s, machine.actuator.corner)
-    sens = _double_pole(s, machine.sensor.corner)
+    amp = machine.actuator.current_gain * double_pole(s, machine.actuator.corner)
+    sens = double_pole(s, machine.sensor.corner)
     if discrete:
         with np.errstate(invalid="ignore", divide="ignore"):
             zoh = np.where(np.abs(s) > 0, (1 - np.exp(-s * t)) / (s * t), 1.0)

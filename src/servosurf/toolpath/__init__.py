@@ -55,7 +55,7 @@ from ._paths import (
     toolpath_from_mapping,
 )
 from ._sample import FS_DEFAULT, SampledPath, count_samples, field_reach, sample
-from ._sweep import check_clearance, sweep
+from ._sweep import check_clearance, prepare_path, run_kernel, sweep
 from ._tool import Field, Tool, ToolpathWarning, read_waviness_csv
 from ._trajectory import (
     BAND_PITCH,
@@ -91,6 +91,8 @@ __all__ = [
     "count_samples",
     "field_reach",
     "sweep",
+    "prepare_path",
+    "run_kernel",
     "sweep_ordered",
     "CuttingRules",
     "check_clearance",

@@ -375,14 +375,14 @@ class ToolEdge:
         Path
             The written file.
         """
-        from ..viz._edge_plots import plot_tool_edge
+        from ..viz import plot_tool_edge
 
         return plot_tool_edge(self, path)
 
 
 # ------------------------------------------------------------------ reading
 def _load(source: str | os.PathLike | IO[bytes] | bytes) -> tuple[str, str]:
-    from ..io._common import decode_text, load_source
+    from ..io import decode_text, load_source
 
     src = load_source(source)
     return decode_text(src.data), src.name

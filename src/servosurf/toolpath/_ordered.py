@@ -8,12 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._defaults import numba_threads
 from .._validation import check_no_kwargs
 from ..config import param
 from ..errors import ConfigError
-from ..metrology._surface import Surface
+from ..metrology import Surface
 from ._sample import SampledPath
-from ._sweep import _initial_array, _threads, prepare_path
+from ._sweep import _initial_array, prepare_path
 from ._tool import Field, Tool
 
 __all__ = ["CuttingRules", "sweep_ordered"]
@@ -171,7 +172,7 @@ def sweep_ordered(path: SampledPath, tool: Tool, field: Field, *,
         )
     shape = (rows[1] - rows[0], cols[1] - cols[0])
     out, fill = _initial_array(initial, shape, rows, cols, field)
-    with _threads(n_threads):
+    with numba_threads(n_threads):
         prep = prepare_path(path, tool, field, rows=rows, cols=cols, check=check,
                             stacklevel=3)
     meta = {
@@ -196,7 +197,7 @@ def sweep_ordered(path: SampledPath, tool: Tool, field: Field, *,
     R = tool.nose_radius
     s0, ds, wav = tool.waviness_table()
     wav_bound = max(0.0, float(wav.max())) if wav.size else 0.0
-    with _threads(n_threads):
+    with numba_threads(n_threads):
         _sweep_ordered(prep.theta, prep.pts, prep.bidx, prep.bstat, prep.theta_ref, R,
                        tool.half_width, wav, s0, 1.0 / ds, wav_bound, 1e-12 * R,
                        tool.half_width - prep.rmin, field.x0, field.pitch_x, cols[0],

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import math
 import warnings
-from contextlib import contextmanager
 from typing import Literal
 
 import numpy as np
 
+from .._defaults import numba_threads
 from .._validation import check_no_kwargs
 from ..errors import ConfigError
-from ..metrology._surface import Surface
+from ..metrology import Surface
 from ._sample import SampledPath
 from ._tool import Field, Tool, ToolpathWarning
 
@@ -315,27 +315,6 @@ def _initial_array(initial, shape, rows, cols, field):
     return np.array(a, dtype=np.float64, order="C", copy=True), None
 
 
-@contextmanager
-def _threads(n_threads: int | None):
-    if n_threads is None:
-        yield
-        return
-    import numba
-
-    n = int(n_threads)
-    if not 1 <= n <= numba.config.NUMBA_NUM_THREADS:
-        raise ConfigError(
-            f"n_threads must be in [1, {numba.config.NUMBA_NUM_THREADS}], "
-            f"got {n_threads!r}"
-        )
-    old = numba.get_num_threads()
-    numba.set_num_threads(n)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(old)
-
-
 def sweep(path: SampledPath, tool: Tool, field: Field, *,
           initial: float | np.ndarray | Surface | None = None,
           method: Literal["pruned", "exhaustive"] = "pruned",
@@ -414,7 +393,7 @@ def sweep(path: SampledPath, tool: Tool, field: Field, *,
     out, fill = _initial_array(initial, shape, rows, cols, field)
     if not isinstance(path, SampledPath):
         raise ConfigError(f"path must be a SampledPath, got {type(path).__name__}")
-    with _threads(n_threads):
+    with numba_threads(n_threads):
         prep = prepare_path(path, tool, field, rows=rows, cols=cols, check=check,
                             stacklevel=3)
     meta = {
@@ -475,7 +454,7 @@ def run_kernel(prep: PreparedPath, tool: Tool, field: Field, out: np.ndarray, *,
     wav_bound = max(0.0, float(wav.max())) if wav.size else 0.0
     slack = 1e-12 * R
     mirror_rmax = hw - prep.rmin
-    with _threads(n_threads):
+    with numba_threads(n_threads):
         if method == "pruned":
             _sweep_pruned(prep.theta, prep.pts, prep.bidx, prep.bstat, prep.rmid,
                           prep.theta_ref, R, hw, wav, s0, 1.0 / ds, wav_bound, slack,

@@ -10,20 +10,17 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from ._surface_plots import _new_figure, _save_atomic
 
-if TYPE_CHECKING:
-    from ..toolpath._edge import ToolEdge
-
 __all__ = ["plot_tool_edge"]
 
 
 def plot_tool_edge(
-    edge: ToolEdge, path: str | os.PathLike[str], *, dpi: int = 120
+    edge: Any, path: str | os.PathLike[str], *, dpi: int = 120
 ) -> Path:
     """Write the trace with its fit, the rejected spikes and the edge deviation.
 

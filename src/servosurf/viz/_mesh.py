@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import ConfigError, UnsupportedFileFormatError
-from ..metrology._surface import Surface
+from ..metrology import Surface
 
 if TYPE_CHECKING:
     import trimesh

@@ -215,7 +215,7 @@ def nc_figures(result, summary_plots: dict[str, Any], out_dir: str | Path, *,
     result : SimulationResult
         The run (its ``spec.path`` is a BlockPath).
     summary_plots : dict
-        The ``_plots`` entry of :func:`servosurf.report.analyse_nc`.
+        The figure data of :func:`servosurf.report.analyse_nc` (its ``plot_data``).
     out_dir : str or Path
         Output folder.
     name : str, optional

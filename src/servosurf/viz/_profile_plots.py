@@ -9,14 +9,11 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from ._surface_plots import _new_figure, _save_atomic
-
-if TYPE_CHECKING:
-    from ..report._profile_compare import ProfileComparison
 
 __all__ = ["plot_profile_overlay", "plot_profile_spectra", "plot_profile_table"]
 
@@ -29,7 +26,7 @@ def _fmt_um(v: float) -> str:
     return "n/a" if v is None or not np.isfinite(v) else f"{v * 1e6:.2f} \u00b5m"
 
 
-def _zoom_window(result: ProfileComparison, width: float) -> tuple[float, float]:
+def _zoom_window(result: Any, width: float) -> tuple[float, float]:
     """A window of ``width`` m inside the longest evaluated run of samples."""
     both = np.isfinite(result.measured_roughness.z) & np.isfinite(
         result.simulated_roughness.z)
@@ -47,7 +44,7 @@ def _zoom_window(result: ProfileComparison, width: float) -> tuple[float, float]
 
 
 def plot_profile_overlay(
-    result: ProfileComparison, path: str | os.PathLike[str], *, dpi: int = 120
+    result: Any, path: str | os.PathLike[str], *, dpi: int = 120
 ) -> Path:
     """Write the two registered profiles, primary and roughness, to a PNG.
 
@@ -146,7 +143,7 @@ def _fmt_pct(a: float | None, b: float | None) -> str:
 
 
 def plot_profile_table(
-    result: ProfileComparison, path: str | os.PathLike[str], *, dpi: int = 120
+    result: Any, path: str | os.PathLike[str], *, dpi: int = 120
 ) -> Path:
     """Write the roughness parameters of both sides as a table figure (PNG).
 
@@ -209,7 +206,7 @@ def plot_profile_table(
 
 
 def plot_profile_spectra(
-    result: ProfileComparison, path: str | os.PathLike[str], *, dpi: int = 120
+    result: Any, path: str | os.PathLike[str], *, dpi: int = 120
 ) -> Path:
     """Write the one-sided PSDs of the two roughness profiles to a PNG.
 

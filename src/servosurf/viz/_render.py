@@ -26,7 +26,7 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import ConfigError
-from ..metrology._surface import Surface
+from ..metrology import Surface
 from ._mesh import _check_exaggeration, _triangulate
 
 __all__ = ["render_surface", "RenderFallbackWarning", "MAX_RENDER_POINTS"]

@@ -16,6 +16,7 @@ __all__ = [
     "plot_power_shares",
     "plot_loop_bode",
     "plot_tool_frfs",
+    "plot_frf_fit",
 ]
 
 _SRC_LABEL = {
@@ -250,4 +251,41 @@ def plot_power_shares(
     ax.set_ylabel("share of real-error power [%]")
     ax.set_title(title or "Error power contribution per source (cf. Fig. 15)")
     ax.legend(fontsize=8)
+    return save(fig, path)
+
+
+def plot_frf_fit(freq: np.ndarray, measured: np.ndarray, before: np.ndarray,
+                 after: np.ndarray, path: str | Path, *, title: str = "") -> Path:
+    """Bode plot of a measured open-loop FRF and the model before and after a fit.
+
+    Parameters
+    ----------
+    freq : ndarray of shape (n,)
+        Frequencies, in Hz.
+    measured, before, after : ndarray of complex, shape (n,)
+        The measured FRF and the model's before and after the fit, in V/V
+        (control input u -> sensor).
+    path : str or Path
+        PNG file.
+    title : str, optional
+        Figure title.
+
+    Returns
+    -------
+    Path
+        The PNG file.
+    """
+    fig, ax = figure(2, 1, figsize=(8, 6), sharex=True)
+    for lab, h, st in (
+        ("measured", measured, "k."),
+        ("before", before, "C0--"),
+        ("after", after, "C3-"),
+    ):
+        ax[0].loglog(freq, np.abs(h), st, ms=2, label=lab)
+        ax[1].semilogx(freq, np.degrees(np.angle(h)), st, ms=2)
+    ax[0].set_ylabel("|u -> sensor| [V/V]")
+    ax[1].set_ylabel("phase [deg]")
+    ax[1].set_xlabel("frequency [Hz]")
+    ax[0].legend()
+    ax[0].set_title(title)
     return save(fig, path)

@@ -1,4 +1,9 @@
-"""One task per item, in this process or on a dask cluster, results in item order."""
+"""One task per item, in this process or on a dask cluster, results in item order.
+
+On the ground floor: the noise design study, the realisation study and the face
+run all map their tasks through :func:`map_tasks` (re-exported by
+:mod:`servosurf.scale`).
+"""
 
 from __future__ import annotations
 

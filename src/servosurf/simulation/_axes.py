@@ -19,8 +19,21 @@ from typing import Any
 
 import numpy as np
 
-from . import _progress
-from .errors import ConfigError
+from .. import _progress
+from ..errors import ConfigError
+from ..toolpath import check_clearance, sample, sweep
+from ._common import (
+    KINEMATIC,
+    MAX_SPAN_SAMPLES,
+    SETTLE_TIME,
+    SimulationResult,
+    _initial,
+    _kernel_field,
+    _measure,
+    _physical,
+    _reach,
+    cutting_span,
+)
 
 __all__ = ["simulate_axes"]
 
@@ -57,18 +70,6 @@ def simulate_axes(spec, tool, machine, workpiece, parts, *, seed: int, instrumen
         The map; ``t``, ``z_command`` and the deviations are empty for a kinematic
         run.
     """
-    from .simulation import (
-        KINEMATIC,
-        SETTLE_TIME,
-        SimulationResult,
-        _initial,
-        _kernel_field,
-        _physical,
-        _reach,
-        _span,
-    )
-    from .toolpath import check_clearance, sample, sweep
-
     axis = machine.axis
     kinematic = (parts is not None and KINEMATIC in parts) or axis.model == "none"
     if parts is None:
@@ -107,12 +108,10 @@ def simulate_axes(spec, tool, machine, workpiece, parts, *, seed: int, instrumen
                          else "controller rate")
     else:
         fs = float(axis.sample_rate)
-        t0, t1 = _span(spec, tool)
+        t0, t1 = cutting_span(spec, tool)
         k0 = max(int(np.floor((t0 - SETTLE_TIME) * fs)), 0)
         k1 = int(np.ceil(t1 * fs)) + 2
         n = k1 - k0
-        from .simulation import MAX_SPAN_SAMPLES
-
         if n > MAX_SPAN_SAMPLES:
             raise ConfigError(
                 f"the field needs {n} axis samples ({n / fs:.1f} s of cutting at "
@@ -165,14 +164,7 @@ def simulate_axes(spec, tool, machine, workpiece, parts, *, seed: int, instrumen
     if spec.kind == "nc":
         settings["nc"] = spec.path.describe()
     surface = surface.replace(metadata={**surface.metadata, "simulation": settings})
-    measured = None
-    if instrument is not None:
-        with _progress.stage("interferometer model"):
-            from .metrology._interferometer import load_instrument, measure
-
-            inst = (load_instrument(instrument)
-                    if isinstance(instrument, str | dict) else instrument)
-            measured = measure(surface, inst, seed=int(seed))
+    measured = None if instrument is None else _measure(surface, instrument, seed)
     return SimulationResult(
         surface=surface, measured=measured, t=t, z_command=z_cmd, deviation=dev,
         force=np.zeros(t.size), following_error=np.zeros(t.size), machine=machine,
