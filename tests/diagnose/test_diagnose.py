@@ -267,10 +267,13 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
         "fit_before_percent",
         "fit_after_percent",
         "unexplained_power_fraction",
+        "refused",
     }
     assert data["verdict"] == "explained"
     for m in data["mismatches"]:
         assert set(m) >= {"recording", "domain", "where", "significance"}
+    for r in data["refused"]:  # candidates refused as physically implausible
+        assert set(r) >= {"effect", "parameters", "reason"} and r["reason"]
     e = data["explanations"][0]
     assert set(e) >= {
         "effect",

@@ -275,9 +275,20 @@ def test_a_term_beyond_its_bounds_or_at_a_search_bound_is_implausible(small):
     why = lines.implausible(far, 0, ev)
     assert why is not None and "amplitude" in why and "above" in why
     assert lines.implausible(Model.of(E.BaseLineParams(1000.0, 1e-9)), 0, ev) is None
+    # the workshop vibration curve (800 um/s RMS, 1.13 mm/s peak) at 1 kHz: a peak
+    # displacement of 1.13e-3 / (2 pi 1e3) = 180 nm
+    assert "above" in lines.implausible(Model.of(E.BaseLineParams(1000.0, 200e-9)), 0,
+                                        ev)
+    assert lines.implausible(Model.of(E.BaseLineParams(1000.0, 160e-9)), 0, ev) is None
     mass = get_effect("recalibration")
     heavy = Model.of(E.RecalibrationParams(moving_mass=0.277))  # issue 19
     assert "moving_mass" in mass.implausible(heavy, 0, ev)
+    # within 20 % of the case's 0.175 kg: 0.21 kg is the upper end
+    assert ev.nominal.moving_mass == MASS
+    assert "above" in mass.implausible(Model.of(E.RecalibrationParams(
+        moving_mass=0.215)), 0, ev)
+    assert mass.implausible(Model.of(E.RecalibrationParams(moving_mass=0.205)), 0,
+                            ev) is None
     # a value pinned at the end of its search range (the fit wanted more)
     mode = get_effect("structural-mode")
     pinned = Model.of(E.StructuralModeParams(6100.0, 0.5, 1e-9))
