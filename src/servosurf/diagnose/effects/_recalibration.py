@@ -139,8 +139,12 @@ class RecalibrationEffect(Effect):
         return model.with_terms(NAME, (RecalibrationParams(**kw),))
 
     def free(self, model, slot, ev, cfg=None):
+        ps = model.get(NAME)
+        q = ps[slot] if slot < len(ps) else None
         out = []
         for a in _FIELDS:
+            if q is not None and getattr(q, a) is None:
+                continue  # the machine file's value, not fitted
             v = self._nom(ev, a)
             out.append(Free(a, NAME, slot, a, v / 3, v * 3, True))
         return out
