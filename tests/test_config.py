@@ -19,7 +19,9 @@ def test_builtin_loads_and_is_listed():
     m = load_machine()
     assert m.mechanics.moving_mass == pytest.approx(0.075)
     assert m.controller.sample_rate == 199.6e3
-    assert {d.name for d in m.alternative_disturbances} == {"section-3.3"}
+    assert {d.name for d in m.alternative_disturbances} == {
+        "section-3.3", "section-3.3-3dB"
+    }
 
 
 def test_unknown_key_suggests(tmp_path):

@@ -13,7 +13,7 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from typing import TypeVar
 
-__all__ = ["stage", "bar", "set_quiet", "is_quiet"]
+__all__ = ["stage", "bar", "note", "set_quiet", "is_quiet"]
 
 T = TypeVar("T")
 _QUIET = [os.environ.get("SERVOSURF_QUIET", "") not in ("", "0")]
@@ -39,6 +39,12 @@ def stage(name: str) -> Iterator[None]:
     if not _QUIET[0]:
         dt = time.perf_counter() - t0
         print(f"[servosurf] {name}: done in {dt:.2f} s", file=sys.stderr, flush=True)
+
+
+def note(text: str) -> None:
+    """Print ``[servosurf]   text`` on stderr (an aside inside a stage)."""
+    if not _QUIET[0]:
+        print(f"[servosurf]   {text}", file=sys.stderr, flush=True)
 
 
 def bar(it: Iterable[T], *, total: int | None = None, desc: str = "") -> Iterable[T]:

@@ -46,6 +46,7 @@ def param(
     low: float | None = None,
     high: float | None = None,
     low_open: bool = False,
+    plausible: tuple[float, float] | None = None,
     default_factory: Any = dataclasses.MISSING,
 ) -> Any:
     """Declare a configuration field with its unit, description, source and bounds.
@@ -64,6 +65,9 @@ def param(
         Inclusive bounds checked on construction.
     low_open : bool, default: False
         Make the lower bound exclusive (``value > low``).
+    plausible : (float, float), optional
+        Physically plausible range, in ``unit``: a file value outside it (a unit
+        slip such as ``amplitude = 10`` meant in um) is refused, naming the slip.
     default_factory : callable, optional
         Factory for mutable defaults.
 
@@ -79,6 +83,7 @@ def param(
         "low": low,
         "high": high,
         "low_open": low_open,
+        "plausible": plausible,
     }
     kw: dict[str, Any] = {"metadata": meta}
     if default is not dataclasses.MISSING:
@@ -98,7 +103,8 @@ def _type_name(tp: Any) -> str:
     return str(tp).replace("typing.", "")
 
 
-def _check_bounds(value: Any, meta: Mapping[str, Any], dotted: str) -> None:
+def _check_bounds(value: Any, meta: Mapping[str, Any], dotted: str,
+                  default: Any = None) -> None:
     if not isinstance(value, int | float) or isinstance(value, bool):
         return
     low, high = meta.get("low"), meta.get("high")
@@ -113,6 +119,14 @@ def _check_bounds(value: Any, meta: Mapping[str, Any], dotted: str) -> None:
             raise ConfigError(f"{dotted} must be >= {low:g}{u}, got {value!r}")
     if high is not None and value > high:
         raise ConfigError(f"{dotted} must be <= {high:g}{u}, got {value!r}")
+    plausible = meta.get("plausible")
+    if plausible is not None:
+        from ._validation import check_plausible
+
+        typical = default if isinstance(default, int | float) else None
+        check_plausible(value, name=dotted, unit=unit, low=plausible[0],
+                        high=plausible[1], what=meta.get("doc") or "",
+                        typical=typical)
 
 
 def _convert(value: Any, tp: Any, dotted: str) -> Any:
@@ -231,7 +245,7 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], *, prefix: str = "") -> 
             )
         f = fields[name]
         converted = _convert(value, hints[name], dotted)
-        _check_bounds(converted, f.metadata, dotted)
+        _check_bounds(converted, f.metadata, dotted, f.default)
         kwargs[name] = converted
     missing = [
         n
@@ -291,6 +305,20 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{p}: is a directory, expected a TOML file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:  # e.g. a Latin-1 "µm" in a comment
+        raise ConfigError(_encoding_message(p, exc)) from None
+
+
+def _encoding_message(path: Path, exc: UnicodeDecodeError) -> str:
+    """One line naming the line and byte of a non-UTF-8 TOML file."""
+    data = exc.object if isinstance(exc.object, bytes) else b""
+    line = data.count(b"\n", 0, exc.start) + 1
+    bad = data[exc.start:exc.end]
+    return (
+        f"{path}: not UTF-8 text (byte 0x{bad.hex() or '??'} on line {line}, likely "
+        "a Latin-1 or Windows-1252 character such as µ or °); TOML files must be "
+        "UTF-8: save the file as UTF-8 or write um instead of µm"
+    )
 
 
 def _toml_value(v: Any) -> str:
@@ -305,6 +333,13 @@ def _toml_value(v: Any) -> str:
     if isinstance(v, list | tuple):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def _toml_key(k: str) -> str:
+    """A bare TOML key, or a quoted one when it holds other characters (dots)."""
+    import re
+
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _toml_value(k)
 
 
 def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
@@ -344,7 +379,7 @@ def dump_toml(data: Mapping[str, Any], *, header: str = "") -> str:
         elif path and scalars:
             lines.append(f"\n[{path}]")
         for k, v in scalars.items():
-            lines.append(f"{k} = {_toml_value(v)}")
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
         for k, v in subs.items():
             emit(v, f"{path}.{k}" if path else k)
         for k, v in arrays.items():

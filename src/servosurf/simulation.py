@@ -206,6 +206,17 @@ def _design_force(path, tool, kt: float, t: np.ndarray) -> np.ndarray:
     return kt * np.interp(feed, levels, area) * ramp
 
 
+def _check_nyquist(spec, fs: float) -> None:
+    """Refuse a toolpath motion frequency the controller cannot represent."""
+    f = getattr(spec.path, "frequency", None)
+    if f is not None and f >= fs / 2:
+        raise ConfigError(
+            f"{spec.kind}.frequency = {f:g} Hz is at or above the controller's "
+            f"Nyquist frequency {fs / 2:g} Hz (controller.sample-rate {fs:g} Hz): the "
+            "servo cannot follow it; FTS frequencies are Hz to a few kHz"
+        )
+
+
 def simulate(
     toolpath,
     *,
@@ -313,6 +324,7 @@ def simulate(
             "the cutting-force part needs the chip of a facing or lenslet path; for "
             "an NC program use parts tracking and vibration, or kinematic")
     fs = machine.controller.sample_rate
+    _check_nyquist(spec, fs)
 
     with _progress.stage("servo loop"):
         # the installed controller on the (hook-perturbed) plant
@@ -490,6 +502,7 @@ def simulate(
 #: Scalar metrics of :func:`realisation_study`, each in SI (m, s, N).
 REALISATION_METRICS = (
     "form_error_max_m",
+    "form_error_rim_max_m",
     "form_error_rms_m",
     "ra_m",
     "sa_m",
@@ -510,7 +523,9 @@ class RealisationStudy:
     metrics : dict of str to ndarray of shape (k,)
         Per seed, the scalar metrics of :data:`REALISATION_METRICS` (SI; NaN where
         the analysis has none, e.g. no form error on a flat face) and
-        ``peak1_per_m`` / ``peak2_per_m``, the two strongest spectral peaks (1/m).
+        ``peak1_per_m`` / ``peak2_per_m``, the frequencies (1/m) of the two
+        strongest spectral lines, matched by frequency across the seeds (NaN for a
+        seed without that line; see ``_match_lines``).
     """
 
     seeds: np.ndarray
@@ -566,9 +581,47 @@ def _realisation_metrics(toolpath, kwargs: dict, seed: int) -> dict:
     for k in REALISATION_METRICS:
         v = summary.get(k)
         out[k] = float("nan") if v is None else float(v)
-    peaks = list(summary.get("spectrum_peaks_per_m") or [])
-    for i in (0, 1):
-        out[f"peak{i + 1}_per_m"] = float(peaks[i]) if len(peaks) > i else float("nan")
+    found = (summary.get("_plots") or {}).get("spectrum", (None, None, []))[2]
+    out["_peaks"] = [(float(q["freq_per_m"]), float(q.get("psd_m3", 1.0)))
+                     for q in found or []]
+    return out
+
+
+#: Peaks of two realisations within this relative distance are the same line.
+LINE_TOLERANCE = 0.05
+
+
+def _match_lines(peaks: list[list[tuple[float, float]]], n_lines: int = 2) -> dict:
+    """Per-seed frequencies of the same spectral lines, matched by frequency.
+
+    The peaks of all seeds are grouped into lines (a peak joins a line whose median
+    frequency lies within :data:`LINE_TOLERANCE`); lines found in at least half of
+    the seeds are ranked by their median PSD, strongest first. ``peak{k}_per_m`` of
+    a seed is its peak on line k (NaN when that seed has none), so the statistics
+    average one line, not whichever peak came second in each seed.
+    """
+    lines: list[dict] = []  # {"f": [...], "p": [...], "seeds": [...]}
+    flat = sorted((f, p, i) for i, pk in enumerate(peaks) for f, p in pk)
+    for f, p, i in flat:
+        near = [ln for ln in lines
+                if abs(f - np.median(ln["f"])) <= LINE_TOLERANCE * f and i not in
+                ln["seeds"]]
+        if near:
+            near[0]["f"].append(f)
+            near[0]["p"].append(p)
+            near[0]["seeds"].append(i)
+        else:
+            lines.append({"f": [f], "p": [p], "seeds": [i]})
+    k = len(peaks)
+    common = [ln for ln in lines if 2 * len(ln["seeds"]) >= k]
+    common.sort(key=lambda ln: -float(np.median(ln["p"])))
+    out = {}
+    for j in range(n_lines):
+        col = np.full(k, np.nan)
+        if j < len(common):
+            for f, i in zip(common[j]["f"], common[j]["seeds"], strict=True):
+                col[i] = f
+        out[f"peak{j + 1}_per_m"] = col
     return out
 
 
@@ -616,5 +669,7 @@ def realisation_study(toolpath, *, seeds: Sequence[int], client=None, progress=N
     spec = toolpath if isinstance(toolpath, ToolpathSpec) else load_toolpath(toolpath)
     task = functools.partial(_realisation_metrics, spec, kwargs)
     rows = map_tasks(task, seeds, client=client, progress=progress)
+    peaks = [r.pop("_peaks") for r in rows]
     metrics = {k: np.array([r[k] for r in rows], dtype=float) for k in rows[0]}
+    metrics.update(_match_lines(peaks))
     return RealisationStudy(np.array(seeds, dtype=np.int64), metrics)

@@ -22,7 +22,7 @@ def write(tmp_path, name, text):
 def test_shipped_files_carry_the_parameters():
     wp = load_workpiece("workpieces/nip.toml")
     assert wp.material == Material(
-        name=wp.material.name, specific_thrust_pressure=1.016e9,
+        name=wp.material.name,
         specific_cutting_pressure=3.5e9, source=wp.material.source)  # = defaults
     for name in ("flat_facing", "lenslet_5um", "lenslet_10um"):
         assert load_toolpath(f"toolpaths/{name}.toml").tool.edge_radius == 20e-9

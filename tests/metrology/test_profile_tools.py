@@ -106,6 +106,30 @@ def test_registration_max_shift_limits_the_search():
     assert near.correlation < 0.5
 
 
+def test_registration_shift_range_restricts_the_search():
+    # the moving profile holds the reference texture twice: at shift 0.1 mm, and
+    # at shift -0.5 mm with another texture added (a weaker match); the whole
+    # search finds the first, a window around the second finds the second
+    f, g = texture(6), texture(7)
+    x = DX * np.arange(1000)  # 0 .. 0.5 mm
+    ref = Profile(f(x), DX)
+    xm = -0.2e-3 + DX * np.arange(2400)  # -0.2 .. 1.0 mm
+    second = xm >= 0.5e-3
+    zm = np.where(second, f(xm - 0.5e-3) + 0.8 * g(xm), f(xm + 0.1e-3))
+    mov = Profile(zm, DX, x0=xm[0])
+    whole = register_profiles(ref, mov, mirror=False)
+    assert abs(whole.shift - 0.1e-3) < SHIFT_TOL_STEPS * DX
+    win = register_profiles(ref, mov, mirror=False, shift_range=(-0.55e-3, -0.45e-3))
+    assert abs(win.shift + 0.5e-3) < SHIFT_TOL_STEPS * DX
+    assert 0.5 < win.correlation < whole.correlation
+    edge = register_profiles(ref, mov, mirror=False, shift_range=(0.02e-3, 0.05e-3))
+    assert 0.02e-3 - 1e-12 <= edge.shift <= 0.05e-3 + 1e-12
+    with pytest.raises(ConfigError, match="lo <= hi"):
+        register_profiles(ref, mov, shift_range=(1e-4, -1e-4))
+    with pytest.raises(ConfigError, match=r"shift_range must be \(lo, hi\)"):
+        register_profiles(ref, mov, shift_range=(1e-4,))
+
+
 def test_registration_errors():
     p = Profile(np.arange(10.0), 1e-6)
     with pytest.raises(ConfigError, match="mirror must be"):

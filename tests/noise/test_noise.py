@@ -219,3 +219,39 @@ def test_psd_command_round_trip(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     bad.write_text("t,v\n0,1\n")
     assert main(["psd", str(bad), "--out", str(tmp_path / "x.csv")]) == 1
+
+
+def test_a_tuning_failure_is_not_an_instability():
+    """At 0.075 kg the tuning rule runs out of positive gains before the loop goes
+    unstable: the limit is 'untunable' and stability_limit reports none."""
+    from servosurf.errors import ModelError
+    from servosurf.noise import loop_limit, stability_limit, tuning_limit
+    from servosurf.servo import tune_pidf
+
+    light = load_machine().with_moving_mass(0.075)
+    lim = loop_limit(light)
+    assert lim.kind == "untunable"
+    assert stability_limit(light) == np.inf
+    assert tuning_limit(light) == pytest.approx(lim.bandwidth_hz)
+    # the independent check: the tuning rule itself refuses just above the limit
+    with pytest.raises(ModelError, match="cannot tune"):
+        tune_pidf(light.with_bandwidth(lim.bandwidth_hz * 1.002))
+    assert ServoLoop(light.with_bandwidth(lim.last_working_hz)).is_stable()
+    heavy = load_machine().with_moving_mass(0.175)
+    hl = loop_limit(heavy)
+    assert hl.kind == "unstable"
+    assert not ServoLoop(heavy.with_bandwidth(hl.bandwidth_hz * 1.002)).is_stable()
+
+
+def test_design_study_optimum_is_the_refined_one_number():
+    """The study's optima are noise.optimal_bandwidth's (refined), not grid points."""
+    from servosurf.noise import optimal_bandwidth
+
+    m = load_machine()
+    study = design_study(m, [0.175], [300, 468, 874])
+    bw_f, rms_f = optimal_bandwidth(m.with_moving_mass(0.175), which="following")
+    bw_r, _ = optimal_bandwidth(m.with_moving_mass(0.175), which="real")
+    assert study.optimal_following_bandwidth[0] == bw_f
+    assert study.optimal_bandwidth[0] == bw_r
+    assert study.optimal_following_rms[0] == rms_f
+    assert bw_f not in (300, 468, 874)

@@ -223,7 +223,7 @@ def test_cli_one_row_map_measured_no_traceback(tmp_path):
     write_surface(Surface(np.tile(s.z, (3, 1)), s.dx, s.dx, x0=s.x0),
                   tmp_path / "s.datx")
     proc = subprocess.run(
-        [sys.executable, "-m", "servosurf", "-q", "compare", str(tmp_path / "m.datx"),
+        [sys.executable, "-m", "servosurf", "compare", str(tmp_path / "m.datx"),
          "--simulated", str(tmp_path / "s.datx"), "--cutoff", "8e-5", "--out",
          str(tmp_path / "o")],
         capture_output=True, text=True, timeout=300,
@@ -246,3 +246,212 @@ def test_cli_profile_flags_on_two_maps_are_an_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--x-range apply to profiles" in err and "\n" == err[-1]
     assert err.count("\n") == 1
+
+
+# ------------------------------------------------------ split at the spindle axis
+#: The simulated line through the spindle axis (x = 0): the side x < 0 lies half a
+#: turn away, its texture displaced by HALF_REV along the radius.
+HALF_REV = 60e-6
+SIM_META = {"simulation": {"toolpath_kind": "nc"}}
+
+
+def _band(f, *, meta=True, x_min=-1e-3, n=4001):
+    """A one-row band map through the axis: f(r) at azimuth 0, f(r + HALF_REV) at pi."""
+    xs = x_min + DX * np.arange(n)
+    zs = np.where(xs >= 0, f(xs), f(-xs + HALF_REV))
+    return Surface(zs[None, :], DX, DX, x0=float(xs[0]),
+                   metadata=dict(SIM_META) if meta else {})
+
+
+def _through_centre(f, axis, delta, x0, n, *, reverse=False):
+    """A measured line through the axis (at ``axis`` on it) at another azimuth.
+
+    Both sides are displaced inward by ``delta`` from the simulated line, so in
+    the measured frame x_m = x_s + axis + delta below the axis and x_m = x_s + axis
+    - delta above it. ``reverse``: measured from the other end (positions -u).
+    """
+    u = x0 + DX * np.arange(n)
+    r = u - axis
+    z = np.where(r >= 0, f(r + delta), f(-r + HALF_REV + delta))
+    if reverse:
+        return Profile(z[::-1].copy(), DX, x0=-float(u[-1]))
+    return Profile(z, DX, x0=float(u[0]))
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_split_registration_recovers_the_axis_and_opposite_half_shifts(reverse):
+    f = texture(11)
+    axis, delta = 0.4137e-3, 5.3e-6
+    meas = _through_centre(f, axis, delta, 20e-6, 1800, reverse=reverse)
+    band = _band(f)
+    res = compare_profiles(meas, band, cutoff=0.08e-3)
+    d = res.to_dict()
+    assert d["split_at_axis"] is True and d["split_skipped"] is None
+    a = -axis if reverse else axis  # the axis in the measured file's frame
+    # below the axis x_m = +-x_s + a + delta, above it a - delta (either
+    # orientation: a line through the centre read backwards is the line half a
+    # turn away, and fits just as well)
+    assert abs(d["half_shifts_m"]["below"] - (a + delta)) < SHIFT_TOL_STEPS * DX
+    assert abs(d["half_shifts_m"]["above"] - (a - delta)) < SHIFT_TOL_STEPS * DX
+    assert abs(d["axis_position_m"] - a) < SHIFT_TOL_STEPS * DX
+    assert d["shift_m"] == d["axis_position_m"]
+    assert abs(abs(d["half_offset_m"]) - delta) < SHIFT_TOL_STEPS * DX
+    assert res.correlation > 0.99
+    assert min(d["half_correlations"].values()) > 0.99
+    for key in ("ra_m", "rq_m", "rsm_m"):
+        np.testing.assert_allclose(d[f"simulated_{key}"], d[f"measured_{key}"],
+                                   rtol=0.01)
+    # one shift for the whole profile aligns at best one half
+    single = compare_profiles(meas, band, cutoff=0.08e-3, split=False)
+    assert single.to_dict()["split_at_axis"] is False
+    assert single.correlation < 0.8
+
+
+def spiral_grooves(theta, r0=0.65e-3, p0=29e-6):
+    """Radii (m) of the grooves a spiral leaves at azimuth ``theta`` (rad).
+
+    The tool radius against its total angle phi is ``r(phi) = r0 - p0 phi / (2 pi)
+    - b sin(phi / 10)``: a feed per revolution varying by +-30 % over about ten
+    revolutions, as on case 1022 (25.9 .. 33.2 um).
+    """
+    b = 0.3 * p0 * 10 / (2 * np.pi)
+    phi = theta + 2 * np.pi * np.arange(60)
+    r = r0 - p0 * phi / (2 * np.pi) - b * np.sin(phi / 10)
+    return r[r > -p0]
+
+
+def groove_profile(r, grooves, nose=0.19e-3):
+    """Height (m) at radii ``r`` left by round-nose grooves: the lowest circle arc."""
+    d = np.abs(r[:, None] - grooves[None, :])
+    h = nose - np.sqrt(np.maximum(nose**2 - d**2, 0.0))
+    return h.min(axis=1)
+
+
+def test_split_registration_of_spiral_grooves_with_varying_feed():
+    # closed-form cusps of a round nose along a spiral: the simulated line at
+    # azimuths 0 / pi, the measured one at psi / psi + pi, axis at 0.41 mm on it
+    psi, axis = 0.9, 0.41e-3
+    xs = -0.6e-3 + DX * np.arange(2401)
+    zs = np.where(xs >= 0, groove_profile(np.abs(xs), spiral_grooves(0.0)),
+                  groove_profile(np.abs(xs), spiral_grooves(np.pi)))
+    band = Surface(zs[None, :], DX, DX, x0=float(xs[0]), metadata=dict(SIM_META))
+    u = 0.02e-3 + DX * np.arange(1760)
+    r = u - axis
+    zm = np.where(r >= 0, groove_profile(np.abs(r), spiral_grooves(psi)),
+                  groove_profile(np.abs(r), spiral_grooves(psi + np.pi)))
+    meas = Profile(zm, DX, x0=float(u[0]))
+    res = compare_profiles(meas, band, cutoff=0.25e-3)
+    d = res.to_dict()
+    assert d["split_at_axis"]
+    # the grooves at psi lie p psi / (2 pi) (about 4 um) inward: opposite shifts
+    # of the halves; the feed varies along the radius, so each half's shift is a
+    # compromise, but the two sides vary alike and their mean is the axis
+    assert abs(d["axis_position_m"] - axis) < 2 * DX
+    # half offset -p psi' / (2 pi) modulo p, psi' = psi (or psi + pi when the line
+    # is read backwards, which fits as well); p varies by +-30 % (+-1.2 um of it)
+    p0 = 29e-6
+    want = -p0 * (psi + (np.pi if d["mirrored"] else 0.0)) / (2 * np.pi)
+    err = (d["half_offset_m"] - want + p0 / 2) % p0 - p0 / 2
+    assert abs(err) < 1.5e-6
+    # what one shift per half leaves: up to 1.2 um = x = 4 % of p of misalignment;
+    # the autocorrelation of periodic parabolic arcs is -30 B4(x) = 1 - 30 x^2 +
+    # ..., at least 0.95 there
+    assert res.correlation > 0.95
+    np.testing.assert_allclose(d["simulated_ra_m"], d["measured_ra_m"], rtol=0.03)
+    np.testing.assert_allclose(d["simulated_rsm_m"], d["measured_rsm_m"], rtol=0.03)
+    # one shift: one half off by 2 p psi / (2 pi) = 8 um (x = 0.29, -30 B4 < 0)
+    single = compare_profiles(meas, band, cutoff=0.25e-3, split=False)
+    assert single.correlation < 0.8
+
+
+def test_split_needs_a_simulated_axis_and_both_sides():
+    f = texture(12)
+    axis, delta = 0.4137e-3, 5.3e-6
+    meas = _through_centre(f, axis, delta, 20e-6, 1800)
+    # not a servosurf simulation: x = 0 means nothing, one shift
+    plain = compare_profiles(meas, _band(f, meta=False), cutoff=0.08e-3)
+    assert plain.to_dict()["split_at_axis"] is False
+    assert "split" not in plain.info and "split_skipped" not in plain.info
+    forced = compare_profiles(meas, _band(f, meta=False), cutoff=0.08e-3, split=True)
+    assert forced.to_dict()["split_at_axis"] is True
+    assert abs(forced.shift - axis) < SHIFT_TOL_STEPS * DX
+    # a measured profile on one side of the axis (20 um beyond it): one shift,
+    # the one of its long half
+    side = _through_centre(f, axis, delta, axis - 20e-6, 1000)
+    one = compare_profiles(side, _band(f), cutoff=0.08e-3)
+    d = one.to_dict()
+    assert d["split_at_axis"] is False and "one side of the spindle axis" in (
+        d["split_skipped"])
+    assert abs(one.shift - (axis - delta)) < SHIFT_TOL_STEPS * DX
+    far = _through_centre(f, axis, delta, axis + 50e-6, 1000)
+    assert abs(compare_profiles(far, _band(f), cutoff=0.08e-3).shift
+               - (axis - delta)) < SHIFT_TOL_STEPS * DX
+    # split=True on a simulated profile that does not reach the axis
+    with pytest.raises(ConfigError, match="crosses x = 0"):
+        compare_profiles(meas, _band(f, x_min=0.1e-3, n=2000), split=True)
+    with pytest.raises(ConfigError, match="split must be"):
+        compare_profiles(meas, _band(f), split="yes")
+
+
+def test_through_spindle_axis_detection():
+    from servosurf.metrology import profile_through
+    from servosurf.report._profile_compare import through_spindle_axis
+
+    f = texture(13)
+    band = _band(f)
+    assert through_spindle_axis(band, profile_through(band))
+    assert not through_spindle_axis(_band(f, meta=False), profile_through(band))
+    three = Surface(np.tile(band.z, (3, 1)), DX, DX, x0=band.x0, y0=0.0,
+                    metadata=dict(SIM_META))  # centre row at y = DX
+    assert not through_spindle_axis(three, profile_through(three))
+    assert through_spindle_axis(three, profile_through(three, at=0.0))
+    prof = Profile(band.z[0], DX, x0=band.x0, metadata=dict(SIM_META))
+    assert through_spindle_axis(prof, prof)
+    right = Profile(band.z[0, 2100:], DX, x0=band.x0 + 2100 * DX,
+                    metadata=dict(SIM_META))
+    assert not through_spindle_axis(right, right)
+
+
+def test_cli_split_keys_and_flag(tmp_path, capsys):
+    from servosurf.io import read_any, write_surface
+
+    f = texture(14)
+    axis, delta = 0.4137e-3, 5.3e-6
+    meas = _mx_csv(tmp_path / "m.csv", _through_centre(f, axis, delta, 20e-6, 1800))
+    write_surface(_band(f), tmp_path / "band.datx")
+    assert "simulation" in read_any(tmp_path / "band.datx")[0].metadata
+    argv = ["compare", str(meas), "--simulated", str(tmp_path / "band.datx"),
+            "--cutoff", "8e-5", "--json"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["split_at_axis"] is True
+    assert abs(out["axis_position_m"] - axis) < SHIFT_TOL_STEPS * DX
+    assert set(out["half_shifts_m"]) == set(out["half_correlations"]) == {
+        "below", "above"}
+    assert set(out["files"]) >= {"profiles", "roughness", "spectra", "json"}
+    assert (tmp_path / "a" / "roughness.png").stat().st_size > 0
+    assert main([*argv, "--split", "no", "--out", str(tmp_path / "b")]) == 0
+    assert json.loads(capsys.readouterr().out)["split_at_axis"] is False
+    assert main(argv[:-1] + ["--out", str(tmp_path / "c")]) == 0
+    text = capsys.readouterr().out
+    assert "split at axis  axis at 413.70 um" in text
+
+
+def test_axis_search_does_not_rely_on_the_whole_profile_registration():
+    # on case 1022 with the measured edge swept, one shift for the whole WLI
+    # profile lands 0.6 mm away from the axis; the search over axis positions on
+    # the measured profile must still find it. Here the whole-profile guesses
+    # handed to it are wrong on purpose.
+    from servosurf.metrology import profile_through
+    from servosurf.report._profile_compare import _split_search
+
+    f = texture(15)
+    axis, delta = 0.4137e-3, 5.3e-6
+    meas = _through_centre(f, axis, delta, 20e-6, 1800)
+    sim = profile_through(_band(f))
+    found = _split_search(meas, meas, sim, 0.08e-3, "auto", None,
+                          {False: axis + 0.3e-3, True: -0.2e-3})
+    assert found is not None and found["below"] and found["above"]
+    assert abs(found["axis_m"] - axis) < SHIFT_TOL_STEPS * DX
+    assert abs(found["below"]["shift_m"] - (axis + delta)) < SHIFT_TOL_STEPS * DX
+    assert found["score"] > 0.99

@@ -69,7 +69,7 @@ def test_dask_workers_give_identical_results(tmp_path):
     local = simulate_face(spec, tmp_path / "local.zarr", field=field,
                           face_radius=RADIUS, chunk=(64, 64), deviation=dev, fs=FS)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster, \
+                                  dashboard_address=":0") as cluster, \
             distributed.Client(cluster) as client:
         res = simulate_face(spec, str(tmp_path / "dask.zarr"), field=field,
                             face_radius=RADIUS, chunk=(64, 64), deviation=dev, fs=FS,

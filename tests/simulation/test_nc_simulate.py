@@ -176,8 +176,9 @@ def test_cli_nc_flags_refused_for_other_kinds(capsys, tmp_path):
     assert main(["simulate", "toolpaths/flat_facing.toml", "--spindle-rpm", "30",
                  "--out", str(tmp_path / "o")]) == 1
     assert "--spindle-rpm applies to NC programs" in capsys.readouterr().err
-    # one time base at most (argparse usage error)
-    assert main(["simulate", "x.nc", "--spindle-rpm", "30", "--block-time", "1"]) == 2
+    # one time base at most (argparse usage error: one line, exit 1)
+    assert main(["simulate", "x.nc", "--spindle-rpm", "30", "--block-time", "1"]) == 1
+    assert "not allowed with argument" in capsys.readouterr().err
 
 
 def test_cli_small_program_through_python_m(tmp_path):
@@ -185,11 +186,11 @@ def test_cli_small_program_through_python_m(tmp_path):
     prog.write_text(facing_text(0.2, 0.008, 25, 0.0))
     out = tmp_path / "run"
     r = subprocess.run(
-        [sys.executable, "-m", "servosurf", "-q", "simulate", str(prog),
+        [sys.executable, "-m", "servosurf", "simulate", str(prog),
          "--spindle-rpm", "60", "--tool-radius", "0.2e-3", "--out", str(out)],
         capture_output=True, text=True, check=False)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith("centre profile: Ra ")
+    assert r.stdout.startswith("simulate face.nc: centre profile\n  Ra / Rq / Rz ")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["toolpath"]["time_base"] == "spindle 60 rpm (given)"
     for name in ("map_png", "toolpath_png", "profile_png", "roughness_png", "map"):

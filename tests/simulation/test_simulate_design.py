@@ -107,13 +107,14 @@ def test_simulate_cli_reports_the_form_error(tmp_path, capsys):
     for name in ("form_error.png", "toolpath.png", "map.png", "summary.json",
                  "surface.npz"):
         assert (out / name).stat().st_size > 0
-    # without --json: one line with PV and RMS in nm
+    # without --json: the summary states PV and RMS against the design in nm
     rc = main(["simulate", str(toml), "--out", str(out), "--no-render", "--format",
                "npz", "--instrument", "none"])
     assert rc == 0
-    line = capsys.readouterr().out.strip()
+    text = capsys.readouterr().out
     pv = data["form_error_pv_m"] * 1e9
-    assert line.startswith(f"form error against the design: PV {pv:.2f} nm, RMS")
+    line = next(v for v in text.splitlines() if "form error vs design" in v)
+    assert f"PV {pv:.3g} nm" in line and "RMS" in line, line
 
 
 def test_simulate_cli_bad_design_is_one_line(tmp_path, capsys):

@@ -354,6 +354,45 @@ def test_cli_simulate_with_measured_edge(synthetic, tmp_path, capsys):
     assert abs(out["ra_m"] / ra_round - 1) > 0.03
 
 
+def test_cli_nc_program_with_a_measured_edge_needs_no_radius(synthetic, tmp_path,
+                                                            capsys):
+    import json
+
+    _, pts, _, _ = synthetic
+    (tmp_path / "edge.csv").write_bytes(_csv(pts, z=0.0))
+    # a flat facing program: 25 um per revolution from r = 0.4 mm to the axis,
+    # 2 degree blocks; it states no nose radius
+    c = np.arange(16 * 180 + 1) * 2.0
+    x = 0.4 - 0.025 * c / 360.0
+    (tmp_path / "p.nc").write_text(
+        "G71\n" + "\n".join(f"C{a:g} X{b:.9f} Z0" for a, b in
+                             zip(c, x, strict=True)) + "\n")
+    runs = {}
+    for name, extra in (("edge", []), ("round", ["--edge-compensated"])):
+        rc = main(["simulate", str(tmp_path / "p.nc"), "--block-time", "1e-3",
+                   "--tool", str(tmp_path / "edge.csv"), *extra, "--out",
+                   str(tmp_path / name), "--json"])
+        assert rc == 0
+        runs[name] = json.loads(capsys.readouterr().out)
+        assert (tmp_path / name / "tool_edge.png").stat().st_size > 0
+    out = runs["edge"]
+    assert abs(out["tool_edge"]["nose_radius_m"] - R0) < POS_TOL
+    assert out["settings"]["hooks"] == ["MeasuredEdge"]
+    assert out["settings"]["nc"]["reference"] == "tip"
+    # the swept shape (0.2 um waves, 60 um long) reshapes the cusps of the round
+    # nose, whose Ra for parabolic arcs of h = f^2 / (8 R) is 4 h / (9 sqrt 3)
+    h = 25e-6**2 / (8 * R0)
+    ra_round = runs["round"]["ra_m"]
+    assert ra_round == pytest.approx(4 * h / (9 * math.sqrt(3)), rel=0.02)
+    assert abs(out["ra_m"] / ra_round - 1) > 0.03
+    # the same as a toolpath file of kind nc: the trace gives the radius
+    (tmp_path / "p.toml").write_text(
+        'kind = "nc"\n[nc]\nprogram = "p.nc"\nblock-time = 1e-3\n'
+        '[tool]\nedge-trace = "edge.csv"\n')
+    spec = tp.load_toolpath(tmp_path / "p.toml")
+    assert abs(spec.tool.nose_radius - R0) < POS_TOL and spec.tool.has_waviness
+
+
 def test_cli_tool_edge_writes_a_reusable_waviness_csv(synthetic, tmp_path, capsys):
     import json
 

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import argparse
 
+#: Below this correlation after registration the text output adds a hint.
+LOW_CORRELATION = 0.5
+
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
@@ -27,8 +30,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "along it (shift, and a mirror x -> -x if it correlates better), mask "
         "invalid ends, and report Ra, Rq, Rz, RSm of both with the same ISO 4288 "
         "cut-off, form removal and end trimming, the correlation after "
-        "registration, and overlay and spectrum figures. Text output in nm/um, "
-        "--json in SI units (m).",
+        "registration, and overlay, roughness-table and spectrum figures; a "
+        "profile through the centre of a turned part against the band of an NC "
+        "run is registered half by half either side of the spindle axis. Text "
+        "output in nm/um, --json in SI units (m).",
     )
     p.add_argument(
         "measured",
@@ -41,7 +46,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--simulated", metavar="FILE", help="simulated map or profile file"
     )
     src.add_argument(
-        "--toolpath", metavar="T.toml", help="simulate this toolpath first"
+        "--toolpath", metavar="T", help="simulate this toolpath first (TOML file or "
+        "built-in name)"
     )
     p.add_argument("--machine", metavar="M.toml", help="machine for --toolpath")
     p.add_argument("--workpiece", metavar="W.toml", help="workpiece for --toolpath")
@@ -134,6 +140,16 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "it correlates better), yes or no (default auto)",
     )
     prof.add_argument(
+        "--split",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="register the halves of the measured profile on either side of the "
+        "spindle axis separately (a spiral's grooves shift in opposite directions "
+        "on the two sides of a profile through the centre): auto (when the "
+        "simulated map is a servosurf simulation whose line crosses the axis, "
+        "e.g. the band of an NC run), yes or no (default auto)",
+    )
+    prof.add_argument(
         "--max-shift",
         metavar="M",
         type=float,
@@ -156,7 +172,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "both are measurements)",
     )
     p.add_argument(
-        "--out", metavar="DIR", default="results/compare", help="output directory"
+        "--out", metavar="DIR", default="results/compare",
+        help="output folder (default results/compare), replaced whole on success"
     )
     p.add_argument("--json", action="store_true", help="print the JSON summary")
     return p
@@ -166,7 +183,9 @@ def run(args) -> int:
     from .._progress import stage
     from ..io import read_any
     from ..report._profile_compare import as_profile_or_none
+    from ._common import check_flags
 
+    check_flags(args)  # --bandwidth, --mass: positive and plausible
     with stage("reading"):
         measured, _ = read_any(args.measured)
         if args.simulated:
@@ -205,6 +224,7 @@ def _reject_profile_flags(args) -> None:
             ("--cutoff", args.cutoff),
             ("--at", args.at),
             ("--max-shift", args.max_shift),
+            ("--split", None if args.split == "auto" else args.split),
         )
         if value is not None
     ]
@@ -220,7 +240,7 @@ def _run_profiles(args, measured, simulated) -> int:
     from .._progress import stage
     from .._validation import check_positive
     from ..report._profile_compare import compare_profiles
-    from ._common import out_dir, print_json, write_json
+    from ._common import output_folder, print_json, write_json
 
     cutoff = None if args.cutoff is None else check_positive(
         args.cutoff, name="--cutoff")
@@ -240,8 +260,9 @@ def _run_profiles(args, measured, simulated) -> int:
             max_shift=max_shift,
             form=args.form,
             labels=tuple(args.labels),
+            split={"auto": "auto", "yes": True, "no": False}[args.split],
         )
-    d = out_dir(args.out)
+    d = output_folder(args.out)  # swapped in place of --out at the end
     with stage("figures"):
         files = res.plot(d)
     out = res.to_dict()
@@ -252,7 +273,7 @@ def _run_profiles(args, measured, simulated) -> int:
     write_json(d / "compare.json", out)
     if args.json:
         print_json(out)
-    else:
+    elif not args.quiet:
         _print_profiles(out)
     return 0
 
@@ -269,6 +290,15 @@ def _print_profiles(out: dict) -> None:
               f"(x_{lm} = {'-' if out['mirrored'] else ''}x_{ls} + shift)")
     else:
         print("  registration   none (positions taken as they are)")
+    if out.get("split_at_axis"):
+        sb, sa = (out["half_shifts_m"][k] * um for k in ("below", "above"))
+        cb, ca = (out["half_correlations"][k] for k in ("below", "above"))
+        fc = " / ".join("n/a" if c is None else f"{c:.3f}" for c in (cb, ca))
+        print(f"  split at axis  axis at {out['axis_position_m'] * um:.2f} um of the "
+              f"{lm} profile; half shifts {sb:.2f} / {sa:.2f} um, correlations "
+              f"{fc} (below / above the axis)")
+    elif out.get("split_skipped"):
+        print(f"  split at axis  not split: {out['split_skipped']}")
     ends = (f"ends trimmed by {out['trim_length_m'] * um:g} um each"
             if out["ends_trimmed"] else "ends kept")
     print(f"  cut-off        {out['cutoff_m'] * um:g} um ({out['cutoff_rule']}), "
@@ -290,6 +320,10 @@ def _print_profiles(out: dict) -> None:
     corr = out["correlation"]
     print(f"  correlation    {'n/a' if corr is None else format(corr, '.3f')} "
           "(roughness profiles over the evaluation length)")
+    if corr is not None and out["registered"] and corr < LOW_CORRELATION:
+        print(f"  note           correlation below {LOW_CORRELATION:g}: check that "
+              "both profiles hold the same cut zone (a stylus contour that also "
+              "holds the part's flanks needs --x-range)")
     for name, path in out["files"].items():
         print(f"  {name:14} {path}")
 
@@ -302,7 +336,7 @@ def _run_maps(args, measured, simulated) -> int:
     from ..report._compare import compare_surfaces
     from ..viz._common import figure, save
     from ..viz._surface_plots import plot_map
-    from ._common import out_dir, print_json, write_json
+    from ._common import output_folder, print_json, write_json
 
     with stage("registration and residual"):
         out = compare_surfaces(
@@ -313,7 +347,7 @@ def _run_maps(args, measured, simulated) -> int:
             register=not args.no_register,
         )
     plots = out.pop("_plots")
-    d = out_dir(args.out)
+    d = output_folder(args.out)  # swapped in place of --out at the end
     with stage("figures"):
         plot_map(
             plots["residual"],
@@ -353,4 +387,29 @@ def _run_maps(args, measured, simulated) -> int:
     write_json(d / "compare.json", out)
     if args.json:
         print_json(out)
+    _print_result(args, out, d)
     return 0
+
+
+def _print_result(args, out, d) -> None:
+    """Residual, fit and correlation, the registration shift, matched peaks."""
+    from ._common import fmt_length, print_summary
+
+    rows = [
+        ("RMS / PV residual", f"{fmt_length(out['rms_residual_m'])} / "
+         f"{fmt_length(out['pv_residual_m'])} (after removing "
+         f"{', '.join(args.remove) or 'nothing'})"),
+        ("fit / correlation", f"{out['fit_percent']:.1f} % / "
+         f"{out['correlation']:.3f}"),
+    ]
+    shift = out.get("shift_m")
+    if shift:
+        rows.append(("registration shift", f"{shift[0] * 1e6:.3g} um in y, "
+                     f"{shift[1] * 1e6:.3g} um in x"))
+    matched = out.get("peaks_matched_per_m") or []
+    if matched:
+        rows.append(("matched peaks", ", ".join(
+            f"{a * 1e-3:.0f}/{b * 1e-3:.0f}" for a, b in matched)
+            + " mm^-1 (measured/simulated)"))
+    source = args.simulated or args.toolpath
+    print_summary(args, f"compare {args.measured} with {source}", rows, wrote=d)

@@ -71,7 +71,7 @@ def run(args) -> int:
     from .._progress import is_quiet, stage
     from ..diagnose import diagnose
     from ..diagnose._report import figures, fitted_effects_toml, fitted_machine_toml
-    from ._common import atomic_write, out_dir, print_json, write_json
+    from ._common import atomic_write, output_folder, print_json, write_json
 
     def progress(msg: str) -> None:
         if not is_quiet():
@@ -79,7 +79,7 @@ def run(args) -> int:
 
     with stage("diagnosis (locate, rank, fit, select)"):
         d = diagnose(args.manifest, progress=progress)
-    out = out_dir(args.out)
+    out = output_folder(args.out)  # swapped in place of --out at the end
     with stage("fitted machine and pictures"):
         text = fitted_machine_toml(d)
         atomic_write(out / "fitted-machine.toml", lambda p: p.write_text(text))
@@ -95,15 +95,17 @@ def run(args) -> int:
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
-    else:
+    elif not args.quiet:
         print(f"verdict: {d.verdict}")
         for e in d.explanations:
             pars = ", ".join(f"{k} = {v:.4g}" for k, v in e["parameters"].items())
             print(f"  {e['effect']} (delta BIC {e['delta_bic']:.1f}): {pars}")
         for m in (d.remainder if d.verdict != "consistent" else [])[:5]:
             print(f"  left: {m.recording}: {m.where} (-log10 p {m.significance:.1f})")
+        from ._common import _final
+
         print(
             f"fit {d.fit_before_percent:.2f} % -> {d.fit_after_percent:.2f} %; "
-            f"written to {out}"
+            f"written to {_final(out)}"
         )
     return 0

@@ -48,14 +48,14 @@ def run(args) -> int:
         read_frf_csv,
     )
     from ..viz._common import figure, save
-    from ._common import atomic_write, out_dir, print_json, write_json
+    from ._common import atomic_write, output_folder, print_json, write_json
 
     machine = load_machine(args.machine)
     f, y = read_frf_csv(args.frf)
     params = tuple(args.param) if args.param else DEFAULT_IDENT_PARAMS
     with stage("grey-box fit"):
         res = identify(machine, f, y, params=params, digital=not args.analogue)
-    out = out_dir(args.out)
+    out = output_folder(args.out)  # swapped in place of --out at the end
     text = res.machine.to_toml(
         header=f"fitted by servosurf identify to {args.frf}\n"
         f"fit {res.fit_percent_after:.2f} % (before "
@@ -89,4 +89,21 @@ def run(args) -> int:
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
+    _print_result(args, res, out)
     return 0
+
+
+def _print_result(args, res, out) -> None:
+    """Fit before and after, and each fitted parameter against its start."""
+    from ..servo import describe_machine
+    from ._common import print_summary
+
+    units = {r["key"]: r["unit"] for r in describe_machine()}
+    rows = [("fit", f"{res.fit_percent_before:.2f} % -> {res.fit_percent_after:.2f} "
+             "% (MATLAB's normalised fit)")]
+    for key, value in res.parameters.items():
+        start = res.initial.get(key)
+        unit = units.get(key, "")
+        was = f" (start {start:.4g})" if isinstance(start, float | int) else ""
+        rows.append((key, f"{value:.4g} {unit}{was}".replace("  ", " ")))
+    print_summary(args, f"identify {args.frf}: grey-box fit", rows, wrote=out)

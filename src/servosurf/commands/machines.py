@@ -15,7 +15,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--describe",
         action="store_true",
-        help="print every machine-file key with its SI unit and source",
+        help="print every machine-file key with its SI unit, the value in the "
+        "machine (default: seed-prototype) and its provenance label (paper, "
+        "assumed, derived, target:<figures>), as the file's [provenance] table "
+        "states it",
+    )
+    p.add_argument(
+        "--machine",
+        metavar="FILE",
+        help="machine TOML or built-in name for --describe (default: seed-prototype)",
     )
     p.add_argument("--show", metavar="NAME", help="print a built-in machine file")
     p.add_argument("--json", action="store_true", help="JSON output on stdout")
@@ -37,14 +45,17 @@ def run(args) -> int:
         print(builtins[args.show].read_text(), end="")
         return 0
     if args.describe:
-        rows = describe_machine()
+        machine = load_machine(args.machine) if args.machine else load_machine()
+        rows = describe_machine(machine)
         if args.json:
-            print_json({"keys": rows})
+            print_json({"machine": machine.name, "keys": rows})
         else:
             for r in rows:
+                v = r["value"]
+                vs = "" if v is None or v == "" else f" = {v!r}"
                 print(
-                    f"{r['key']:<45} [{r['unit'] or '-'}] {r['doc']}"
-                    + (f"  (source: {r['source']})" if r["source"] else "")
+                    f"{r['key']:<52} [{r['unit'] or '-'}]{vs}  {r['doc']}"
+                    + (f"  ({r['provenance']})" if r["provenance"] else "")
                 )
         return 0
     out = []

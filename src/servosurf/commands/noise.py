@@ -69,22 +69,26 @@ def run(args) -> int:
     from ..noise import design_study, frequency_grid, synthesize
     from ..servo import ServoLoop, load_machine
     from ..viz import _servo_plots as vz
-    from ._common import dask_client, out_dir, print_json, write_json
+    from ._common import (
+        check_flags,
+        dask_client,
+        output_folder,
+        print_json,
+        write_json,
+    )
 
     machine = load_machine(args.machine)
     if args.disturbances:
         machine = machine.with_disturbances(args.disturbances)
+    check_flags(args)  # --mass, --bandwidth(s): positive and plausible
     masses = args.mass or [0.075, 0.175]
-    for m in masses:
-        if not (m > 0 and np.isfinite(m)):
-            raise ConfigError(f"--mass must be a positive mass in kg, got {m!r}")
     bw = args.bandwidth if args.bandwidth is not None else machine.controller.bandwidth
     if not (bw > 0 and np.isfinite(bw)):
         raise ConfigError(f"--bandwidth must be a positive frequency in Hz, got {bw!r}")
     grid = np.array(args.bandwidths if args.bandwidths else np.geomspace(200, 1800, 17))
     if np.any(~np.isfinite(grid)) or np.any(grid <= 0):
         raise ConfigError("--bandwidths must be positive frequencies in Hz")
-    out = out_dir(args.out)
+    out = output_folder(args.out)  # swapped in place of --out at the end
     fs = machine.controller.sample_rate
     freq = frequency_grid(fs)
     summary: dict = {
@@ -155,7 +159,11 @@ def run(args) -> int:
     with stage("figures"):
         figs = {}
         if frfs:
-            figs["loop_bode"] = vz.plot_loop_bode(frfs, out / "loop_bode.png")
+            margins = {f"{e['mass_kg']:g} kg": e["margins"]
+                       for e in summary["masses"]}
+            figs["loop_bode"] = vz.plot_loop_bode(frfs, out / "loop_bode.png",
+                                                  margins)
+            figs["tool_frfs"] = vz.plot_tool_frfs(frfs, out / "tool_frfs.png")
             figs["disturbance_frfs"] = vz.plot_disturbance_frfs(
                 frfs, out / "disturbance_frfs.png"
             )
@@ -176,4 +184,33 @@ def run(args) -> int:
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
+    _print_result(args, summary, study, bw, out)
     return 0
+
+
+def _print_result(args, summary, study, bw, out) -> None:
+    """Per mass: stability, margins and RMS errors at the bandwidth, the optimum."""
+    import math
+
+    from ._common import print_summary
+
+    rows = []
+    for i, e in enumerate(summary["masses"]):
+        m = e["mass_kg"]
+        if not e["stable"]:
+            rows.append((f"{m:g} kg", f"unstable at {bw:g} Hz"))
+            continue
+        g = e["margins"]
+        rows.append((f"{m:g} kg at {bw:g} Hz",
+                     f"real {e['rms_real_m'] * 1e9:.3g} nm RMS, following "
+                     f"{e['rms_following_m'] * 1e9:.3g} nm RMS; phase margin "
+                     f"{g['phase_margin_deg']:.1f} deg, gain margin "
+                     f"{g['gain_margin_db']:.1f} dB"))
+        opt = float(study.optimal_bandwidth[i])
+        if math.isfinite(opt):
+            rows.append((f"{m:g} kg optimum",
+                         f"{opt:.0f} Hz: real {study.optimal_rms[i] * 1e9:.3g} nm "
+                         f"RMS (stable up to {study.stability_limit[i]:.0f} Hz)"))
+    print_summary(args, f"noise: {summary['machine']}, disturbances "
+                  f"{summary['disturbances']}, bandwidths are open-loop crossovers",
+                  rows, wrote=out)

@@ -70,4 +70,14 @@ def run(args) -> int:
                "rms_of_record": float(np.std(x)), "out": str(args.out)}
     if args.json:
         print_json(summary)
+    from ._common import print_summary
+
+    print_summary(args, f"psd {args.record}: Welch, {args.nperseg} samples per "
+                  f"segment at {fs:g} Hz", [
+                      ("bins", f"{f.size} from 0 to {f[-1]:g} Hz, df {f[1] - f[0]:.4g} "
+                       "Hz"),
+                      ("RMS", f"{summary['rms_from_psd']:.4g} from the PSD, "
+                       f"{summary['rms_of_record']:.4g} of the record (record unit: m "
+                       "or A)"),
+                  ], wrote=args.out)
     return 0

@@ -21,14 +21,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "toolpath",
-        metavar="TOOLPATH.toml|PROGRAM",
-        help="toolpath definition (TOML), or an NC program: G-code (.nc, .txt, "
-        "...), a DIFFSYS .pgm job or a c_deg,x_m,z_m .csv",
+        metavar="TOOLPATH|PROGRAM",
+        help="toolpath TOML file or built-in name (servosurf toolpaths), or an NC "
+        "program: G-code (.nc, .txt, ...), a DIFFSYS .pgm job or a c_deg,x_m,z_m "
+        ".csv",
     )
     p.add_argument(
         "--workpiece",
-        metavar="W.toml",
-        help="workpiece/material definition (default: electroless NiP, flat)",
+        metavar="W",
+        help="workpiece TOML file or built-in name (default: electroless NiP, flat)",
     )
     p.add_argument("--machine", metavar="M.toml", help="machine TOML or built-in name")
     p.add_argument(
@@ -105,6 +106,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     add_scheduler_args(p, "the realisations (one task per seed)")
     p.add_argument("--json", action="store_true", help="print summary.json on stdout")
+    p.add_argument("--force", action="store_true",
+                   help="run even when the memory or disk estimate exceeds what this "
+                   "machine has")
     _add_nc_args(p)
     return p
 
@@ -145,8 +149,11 @@ def _add_nc_args(p) -> None:
         "toolpath's tool; writes tool_edge.png")
     tool.add_argument(
         "--edge-compensated", action="store_true",
-        help="with --tool: the path already compensates this measured edge, so "
-        "only its fitted radius enters the sweep (not its deviation)")
+        help="with --tool: the radius-only model, a round nose of the trace's "
+        "fitted radius without the edge's shape. Not needed for a program that "
+        "compensates the edge: the compensation is in the program's Z and the "
+        "cusps are still imprints of the edge's shape, which --tool sweeps by "
+        "default (evidence: benchmarks/real_cut_1022.py)")
 
 
 def _check_cli_values(args) -> None:
@@ -196,20 +203,26 @@ def _nc_overrides(args) -> dict:
     }
 
 
-def load_spec(args):
-    """The toolpath spec of the positional argument (TOML or NC program)."""
+def load_spec(args, edge=None):
+    """The toolpath spec of the positional argument (TOML or NC program).
+
+    ``edge``: the measured tool edge of ``--tool`` (its fitted radius stands in for
+    ``--tool-radius``; the simulation hook then swaps the whole edge in).
+    """
     import dataclasses
     from pathlib import Path
 
+    from .._builtins import resolve_file
     from ..errors import ConfigError
     from ..toolpath import Tool, load_toolpath, nc_spec
 
     tp = Path(args.toolpath)
     if not tp.is_file():
-        raise ConfigError(f"{tp}: toolpath file not found")
+        tp = resolve_file(args.toolpath, kind="toolpath")  # a built-in name
     nc = _nc_overrides(args)
+    radius = args.tool_radius if edge is None else edge.radius
     if tp.suffix.lower() == ".toml":
-        spec = load_toolpath(tp, nose_radius=args.tool_radius, nc_overrides=nc)
+        spec = load_toolpath(tp, nose_radius=radius, nc_overrides=nc)
         if spec.kind != "nc":
             given = [f"--{k.replace('_', '-')}" for k in
                      ("spindle_rpm", "block_time", "feed_per_rev", "reference",
@@ -223,8 +236,36 @@ def load_spec(args):
                     spec, tool=dataclasses.replace(spec.tool,
                                                    nose_radius=args.tool_radius))
         return spec
-    tool = None if args.tool_radius is None else Tool(nose_radius=args.tool_radius)
+    tool = None if radius is None else Tool(nose_radius=radius)
     return nc_spec(tp, tool=tool, **{k: v for k, v in nc.items() if v is not None})
+
+
+def _write_map(surface, path, fmt):
+    """Write the height map with the io writers (atomic), settings as metadata."""
+    from ..io import write_surface
+
+    write_surface(surface, path, format=fmt)
+    return path
+
+
+def _check_footprint(args, spec, tp, out) -> None:
+    """Estimate memory and disk before allocating; refuse above the machine's."""
+    from .._resources import SIM_BYTES_PER_PIXEL, SIM_BYTES_PER_SAMPLE, check_resources
+    from ..servo import load_machine
+    from ..simulation import SETTLE_TIME, _span
+    fs = load_machine(args.machine).controller.sample_rate
+    t0, t1 = _span(spec, spec.tool)
+    samples = (t1 - t0 + SETTLE_TIME) * fs
+    f = spec.field
+    pixels = float(f.nx) * float(f.ny)
+    memory = pixels * SIM_BYTES_PER_PIXEL + samples * SIM_BYTES_PER_SAMPLE
+    # map file, PNGs and an optional mesh (binary STL: 2 triangles of 50 B per pixel)
+    disk = pixels * (8 + (100 if args.mesh else 0)) + 5e6
+    check_resources(
+        f"{tp.stem}'s {f.ny} x {f.nx} px field with {samples:.3g} controller samples",
+        memory=memory, disk=disk, where=out, force=args.force,
+        remedy="lower field.nx/field.ny or raise field.pitch-x/pitch-y",
+    )
 
 
 def _write_map(surface, path, fmt):
@@ -245,24 +286,17 @@ def run(args) -> int:
     from ..report._simulation import analyse
     from ..simulation import simulate
     from ..viz import _surface_plots as sp
-    from ._common import out_dir, print_json, write_json
+    from ._common import check_flags, output_folder, print_json, write_json
 
+    check_flags(args)  # --bandwidth, --mass: positive and plausible
     _check_cli_values(args)
-
-    if args.bandwidth is not None and not (
-        np.isfinite(args.bandwidth) and args.bandwidth > 0
-    ):
-        raise ConfigError(
-            f"--bandwidth must be a positive frequency in Hz, got {args.bandwidth!r}"
-        )
-    if args.mass is not None and not (np.isfinite(args.mass) and args.mass > 0):
-        raise ConfigError(f"--mass must be a positive mass in kg, got {args.mass!r}")
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed}")
     if args.realisations < 1:
         raise ConfigError(f"--realisations must be >= 1, got {args.realisations}")
     tp = Path(args.toolpath)
-    spec = load_spec(args)
+    edge = _measured_edge(args)
+    spec = load_spec(args, edge)
     fmt = args.format or "datx"
     instrument = args.instrument or ("none" if spec.kind == "nc" else "cp300-20x")
     settings = {  # the paper's cutting set-up unless given
@@ -273,14 +307,19 @@ def run(args) -> int:
         "parts": None if args.parts is None else tuple(args.parts),
         "instrument": None if instrument == "none" else instrument,
     }
-    edge = _measured_edge(args, settings)
+    if edge is not None:
+        from ..toolpath import MeasuredEdge
+
+        settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
+    dest = args.out or Path("results") / tp.stem
+    if spec.kind != "nc":
+        _check_footprint(args, spec, tp, dest)
+    out = output_folder(dest)  # swapped in place of --out at the end
     if args.realisations > 1:
-        out = out_dir(args.out or Path("results") / tp.stem)
         return _run_realisations(args, spec, tp, out, settings)
     res = simulate(spec, seed=args.seed, **settings)
     if spec.kind == "nc":
-        return _finish_nc(args, res, tp, fmt)
-    out = out_dir(args.out or Path("results") / tp.stem)
+        return _finish_nc(args, res, tp, fmt, out, edge)
     with stage("analysis"):
         summary = analyse(res)
     plots = summary.pop("_plots")
@@ -291,14 +330,7 @@ def run(args) -> int:
         files["map_png"] = str(
             sp.plot_map(surf, out / "map.png", title=f"{tp.stem}: simulated height map")
         )
-        files["highpass_png"] = str(
-            sp.plot_map(
-                plots["highpass"],
-                out / "highpass.png",
-                title="80 mm^-1 high-pass"
-                + (" of the form error" if "profile" in plots else ""),
-            )
-        )
+        files["highpass_png"] = str(_highpass_figure(plots, out / "highpass.png"))
         if "form_error" in plots:  # design surface: error map against the design
             from ..viz._form_plots import plot_design_feed, plot_form_error
 
@@ -309,18 +341,11 @@ def run(args) -> int:
             files["toolpath_png"] = str(plot_design_feed(
                 res.spec.path, out / "toolpath.png",
                 theta=float(np.arctan2(fld.center_y, fld.center_x))))
-        freq, psd, peaks = plots["spectrum"]
-        speed = summary.get("surface_speed_m_per_s")
         files["spectrum_png"] = str(
-            sp.plot_spectrum(freq, psd, peaks, out / "spectrum.png", speed=speed)
-        )
+            _spectrum_figure(res, summary, plots, out / "spectrum.png"))
         if "profile" in plots:
-            y, z, fe = plots["profile"]
             files["profile_png"] = str(
-                sp.plot_profile_with_form_error(
-                    y, z, fe["reference"], fe["error"], out / "profile.png"
-                )
-            )
+                _profile_figure(res, plots, out / "profile.png"))
         if res.t.size:
             _plot_deviation(res, out / "deviation.png")
             files["deviation_png"] = str(out / "deviation.png")
@@ -354,45 +379,137 @@ def run(args) -> int:
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
-    elif "form_error_pv_m" in summary:
-        nm = {k: summary[k] * 1e9 for k in ("form_error_pv_m", "form_error_rms_m",
-                                            "form_error_pv_bfs_m",
-                                            "form_error_rms_bfs_m")}
-        print(f"form error against the design: PV {nm['form_error_pv_m']:.2f} nm, "
-              f"RMS {nm['form_error_rms_m']:.2f} nm (after piston and tilt); after "
-              f"the best-fit sphere: PV {nm['form_error_pv_bfs_m']:.2f} nm, RMS "
-              f"{nm['form_error_rms_bfs_m']:.2f} nm")
+    _print_result(args, tp, res, summary, out)
     return 0
 
 
-def _measured_edge(args, settings):
-    """``--tool EDGE``: fit the trace and add the hook that swaps the tool in."""
+def _highpass_figure(plots, path):
+    """The 80 mm^-1 high-pass map, its filter-end rim masked, colours by percentile.
+
+    The Gaussian filter has no data beyond the map's edge (the lenslet's rim or the
+    field's border): within half a cut-off of it the high-pass holds the filter's
+    end effect, tens of times the texture, so that band is masked and the colour
+    scale spans the 0.5-99.5 percentiles of the rest.
+    """
+    import numpy as np
+    from scipy import ndimage
+
+    from ..report._simulation import HIGH_PASS_CUTOFF
+    from ..viz import _surface_plots as sp
+
+    hp = plots["highpass"]
+    valid = np.pad(np.isfinite(hp.z), 1, constant_values=False)
+    dist = ndimage.distance_transform_edt(valid, sampling=(hp.dy, hp.dx))[1:-1, 1:-1]
+    rim = 0.5 * HIGH_PASS_CUTOFF
+    shown = hp.replace(z=np.where(dist > rim, hp.z, np.nan))
+    what = " of the form error" if "profile" in plots else ""
+    return sp.plot_map(
+        shown, path, robust=0.5,
+        title=f"{1e-3 / HIGH_PASS_CUTOFF:g} mm^-1 high-pass{what}\n"
+        f"(a {rim * 1e6:.3g} um rim masked: filter end effect)")
+
+
+def _spectrum_figure(res, summary, plots, path):
+    """The PSD along the cut with every detected peak labelled (in mm^-1 and kHz).
+
+    ``summary.json`` lists the peaks above the high-pass cut-off; peaks below it
+    (attenuated by the filter, e.g. a tool mode on a slow facing cut) are found
+    the same way and drawn in grey in the shaded band.
+    """
+    import math
+
+    from ..metrology import find_peaks_spectrum
+    from ..report._simulation import PEAK_FMIN
+    from ..viz import _surface_plots as sp
+
+    freq, psd, peaks = plots["spectrum"]
+    speed = summary.get("surface_speed_m_per_s")
+    if speed is None and hasattr(res.spec.path, "angular_speed"):
+        f = res.spec.field
+        speed = res.spec.path.angular_speed * math.hypot(f.center_x, f.center_y)
+    low = [q for q in find_peaks_spectrum(freq, psd, n=5, fmax=PEAK_FMIN)
+           if q["freq_per_m"] < PEAK_FMIN]
+    return sp.plot_spectrum(
+        freq, psd, [*peaks, *low], path, speed=speed or None, fmin=PEAK_FMIN,
+        title="PSD along the cutting direction (y), peaks labelled")
+
+
+def _profile_figure(res, plots, path):
+    """The lenslet's centre profile along the cut (y) with the form error."""
+    from ..viz import _surface_plots as sp
+
+    y, z, fe = plots["profile"]
+    which = "simulated, as measured" if res.measured is not None else "simulated"
+    return sp.plot_profile_with_form_error(
+        y, z, fe["reference"], fe["error"], path,
+        xlabel="y, along the cut through the lenslet centre (\u00b5m)",
+        label=which, nominal_label="nominal at the air-cut amplitude",
+        title="Lenslet profile along the cutting direction and its form error")
+
+
+def _print_result(args, tp, res, summary, out) -> None:
+    """The numbers a user came for, with units, and where they were written."""
+    from ._common import fmt_length, print_summary
+
+    s, f = summary, res.spec.field
+    rows = []
+    if s.get("form_error_pv_m") is not None:  # design surface
+        rows.append(("form error vs design", f"PV {fmt_length(s['form_error_pv_m'])}, "
+                     f"RMS {fmt_length(s['form_error_rms_m'])} (after piston and "
+                     "tilt)"))
+        if s.get("form_error_pv_bfs_m") is not None:
+            rows.append(("after best-fit sphere",
+                         f"PV {fmt_length(s['form_error_pv_bfs_m'])}, RMS "
+                         f"{fmt_length(s['form_error_rms_bfs_m'])}"))
+    elif s.get("form_error_max_m") is not None:
+        lag = s.get("form_error_lag_m")
+        rows.append(("max form error", fmt_length(s["form_error_max_m"])
+                     + (f" ({fmt_length(lag, 'um')} after the deepest point)"
+                        if lag is not None else "")))
+    if s.get("form_error_rms_m") is not None:
+        rows.append(("form error RMS", fmt_length(s["form_error_rms_m"])))
+    rough = [(k, s.get(f"{k.lower()}_m")) for k in ("Ra", "Sa", "Sq")]
+    rough = [(k, v) for k, v in rough if v is not None]
+    if rough:
+        rows.append((" / ".join(k for k, _ in rough),
+                     " / ".join(f"{v * 1e9:.3g}" for _, v in rough) + " nm"))
+    peaks = s.get("spectrum_peaks_per_m") or []
+    if peaks:
+        rows.append(("spectral peaks", ", ".join(f"{p * 1e-3:.0f}" for p in peaks[:5])
+                     + " mm^-1 (strongest first)"))
+    if s.get("deviation_max_m") is not None:
+        rows.append(("max tool deviation", fmt_length(s["deviation_max_m"])
+                     + f" (cutting force up to {s.get('force_max_n', 0):.3g} N)"))
+    title = (f"simulate {tp.stem}: {f.ny} x {f.nx} px at "
+             f"{f.pitch_x * 1e6:.3g} um, {res.machine.controller.bandwidth:g} Hz "
+             f"crossover, {res.machine.mechanics.moving_mass:g} kg, seed {args.seed}")
+    print_summary(args, title, rows, wrote=out)
+
+
+def _measured_edge(args):
+    """``--tool EDGE``: the fitted trace (None without --tool)."""
     from ..errors import ConfigError
 
     if not args.tool:
         if args.edge_compensated:
             raise ConfigError("--edge-compensated needs --tool EDGE (a measured edge)")
         return None
-    from ..toolpath import MeasuredEdge, read_tool_edge
+    from ..toolpath import read_tool_edge
 
-    edge = read_tool_edge(args.tool)
-    settings["hooks"] = (MeasuredEdge(edge, compensated=args.edge_compensated),)
-    return edge
+    return read_tool_edge(args.tool)
 
 
-def _finish_nc(args, res, tp, fmt) -> int:
+def _finish_nc(args, res, tp, fmt, out, edge=None) -> int:
     """Analysis, map, figures and summary of an NC-program run."""
-    from pathlib import Path
 
     from .._progress import stage
     from ..report import analyse_nc
     from ..viz._nc_plots import nc_figures
-    from ._common import out_dir, print_json, write_json
+    from ._common import fmt_length, print_json, print_summary, write_json
 
     with stage("analysis of the centre profile"):
         summary = analyse_nc(res, profile_length=args.profile_length)
     plots = summary.pop("_plots")
-    out = out_dir(args.out or Path("results") / tp.stem)
     surf = res.measured if res.measured is not None else res.surface
     files = {}
     with stage("writing map and figures"):
@@ -402,21 +519,26 @@ def _finish_nc(args, res, tp, fmt) -> int:
             from ..viz._mesh import write_mesh
 
             files["mesh"] = str(write_mesh(surf, out / f"surface.{args.mesh}"))
+        if edge is not None:
+            files["tool_edge_png"] = str(edge.plot(out / "tool_edge.png"))
+            summary["tool_edge"] = {**edge.summary(),
+                                    "compensated": bool(args.edge_compensated)}
     summary.update(settings=res.settings, files=files, input_file=str(tp))
     write_json(out / "summary.json", summary)
     if args.json:
         print_json(summary)
+    rough = summary["roughness"]
+    if rough["ra_m"] is None:
+        rows = [("roughness", f"not evaluated ({rough['not_evaluated']})")]
     else:
-        rough = summary["roughness"]
-        if rough["ra_m"] is None:
-            print(f"centre profile: roughness not evaluated "
-                  f"({rough['not_evaluated']}); written to {out}")
-            return 0
-        print(f"centre profile: Ra {rough['ra_m'] * 1e9:.1f} nm, Rq "
-              f"{rough['rq_m'] * 1e9:.1f} nm, Rz {rough['rz_m'] * 1e9:.1f} nm, RSm "
-              f"{rough['rsm_m'] * 1e6:.2f} um (cut-off {rough['cutoff_m'] * 1e3:g} "
-              f"mm, evaluation length {rough['evaluation_length_m'] * 1e3:.3g} mm); "
-              f"written to {out}")
+        rows = [
+            ("Ra / Rq / Rz", f"{rough['ra_m'] * 1e9:.1f} / {rough['rq_m'] * 1e9:.1f} / "
+             f"{rough['rz_m'] * 1e9:.1f} nm"),
+            ("RSm", fmt_length(rough["rsm_m"], "um")),
+            ("cut-off / evaluation", f"{rough['cutoff_m'] * 1e3:g} mm / "
+             f"{rough['evaluation_length_m'] * 1e3:.3g} mm"),
+        ]
+    print_summary(args, f"simulate {tp.name}: centre profile", rows, wrote=out)
     return 0
 
 
@@ -451,7 +573,29 @@ def _run_realisations(args, spec, tp, out, settings) -> int:
         write_json(out / "realisations.json", summary)
     if args.json:
         print_json(summary)
+    _print_realisations(args, tp, study, out)
     return 0
+
+
+def _print_realisations(args, tp, study, out) -> None:
+    """Mean and 5-95 % range of the headline metrics over the realisations."""
+    from ._common import print_summary
+
+    stats = study.statistics()
+    rows = []
+    for key, label, scale, unit in (
+        ("form_error_max_m", "max form error", 1e9, "nm"),
+        ("ra_m", "Ra", 1e9, "nm"),
+        ("sa_m", "Sa", 1e9, "nm"),
+        ("peak1_per_m", "strongest spectral line", 1e-3, "mm^-1"),
+    ):
+        st = stats.get(key)
+        if st:
+            rows.append((label, f"mean {st['mean'] * scale:.4g} {unit}, 5-95 % "
+                         f"{st['p5'] * scale:.4g}..{st['p95'] * scale:.4g} {unit}"))
+    print_summary(args, f"simulate {tp.stem}: {study.seeds.size} vibration "
+                  f"realisations (seeds {study.seeds[0]}..{study.seeds[-1]})", rows,
+                  wrote=out)
 
 
 def _plot_realisations(study, path):
@@ -464,7 +608,7 @@ def _plot_realisations(study, path):
         ("form_error_max_m", "max form error [nm]", 1e9),
         ("ra_m", "Ra [nm]", 1e9),
         ("sa_m", "Sa [nm]", 1e9),
-        ("peak1_per_m", "strongest spectral peak [1/mm]", 1e-3),
+        ("peak1_per_m", "strongest spectral line (matched\nby frequency) [1/mm]", 1e-3),
     ]
     shown = [s for s in shown if np.isfinite(study.metrics[s[0]]).any()]
     fig, axes = figure(1, len(shown), figsize=(3.2 * len(shown), 3.6), squeeze=False)

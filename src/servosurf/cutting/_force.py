@@ -25,6 +25,7 @@ __all__ = [
     "Precut",
     "Workpiece",
     "load_workpiece",
+    "builtin_workpieces",
     "ChipModel",
     "segment_area",
     "facing_chip_area",
@@ -42,11 +43,13 @@ class Material:
 
     name: str = param("Electroless plated NiP alloy", doc="material name")
     specific_thrust_pressure: float = param(
-        1.016e9,
+        1265626817.9154398,
         unit="Pa",
         low=0.0,
+        plausible=(1e7, 1e11),
         doc="thrust force per uncut chip area, k_t",
-        source="calibrated to seed paper Fig. 17b (295 nm peak deviation)",
+        source="target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation; "
+        "servosurf.calibration.solve_thrust_pressure)",
     )
     specific_cutting_pressure: float = param(
         3.5e9,
@@ -55,7 +58,10 @@ class Material:
         doc="tangential force per uncut chip area",
         source="assumed; reported only",
     )
-    source: str = param("", doc="where the coefficients come from")
+    source: str = param(
+        "target:deviation_max (seed paper Fig. 17b, 295 nm peak deviation)",
+        doc="where the coefficients come from",
+    )
     # -- material parts of the forward model (switched on by simulate's parts
     # "ploughing", "side-flow" and "recovery"); heights scale with the tool's
     # cutting-edge radius r_n (tool.edge-radius)
@@ -133,14 +139,25 @@ class Workpiece:
             )
 
 
-def load_workpiece(source: str | Path | None = None) -> Workpiece:
-    """Load a workpiece TOML file (``None``: the electroless NiP defaults).
+def builtin_workpieces() -> dict[str, Path]:
+    """Return ``{name: path}`` of the workpiece files shipped with servosurf."""
+    from .._builtins import builtin_files
 
-    Relative ``precut.file`` paths resolve against the TOML file's folder.
+    return builtin_files("workpiece")
+
+
+def load_workpiece(source: str | Path | None = None) -> Workpiece:
+    """Load a workpiece TOML file or built-in (``None``: the electroless NiP defaults).
+
+    ``source`` is a path or the name of a built-in workpiece (see
+    :func:`builtin_workpieces`, e.g. ``"nip"``). Relative ``precut.file`` paths
+    resolve against the TOML file's folder.
     """
+    from .._builtins import resolve_file
+
     if source is None:
         return Workpiece()
-    path = Path(source)
+    path = resolve_file(source, kind="workpiece")
     data = load_toml(path)
     try:
         wp = from_mapping(Workpiece, data)

@@ -258,8 +258,16 @@ def load_manifest(path: str | Path) -> Manifest:
             Path("toolpaths") / (tp.name if tp.suffix else tp.name + ".toml"),
         ]
         found = next((c for c in cands if c.is_file()), None)
+        if found is None:  # a built-in toolpath by name (servosurf toolpaths)
+            from ..toolpath import builtin_toolpaths
+
+            name = tp.stem if tp.suffix == ".toml" else tp.name
+            found = builtin_toolpaths().get(name)
         if found is None:
-            raise ConfigError(f"{where}: toolpath {str(tp)!r}: no such file")
+            raise ConfigError(
+                f"{where}: toolpath {str(tp)!r}: no such file and no built-in of that "
+                f"name ({', '.join(builtin_toolpaths())})"
+            )
         toolpath = found
     bandwidth = (
         _number(norm["bandwidth"], "bandwidth (Hz)", where)
@@ -280,8 +288,16 @@ def load_manifest(path: str | Path) -> Manifest:
             Path("workpieces") / (wp.name + ".toml"),
         ]
         found = next((c for c in cands if c.is_file()), None)
+        if found is None:  # a built-in workpiece by name
+            from ..cutting import builtin_workpieces
+
+            name = wp.stem if wp.suffix == ".toml" else wp.name
+            found = builtin_workpieces().get(name)
         if found is None:
-            raise ConfigError(f"{where}: workpiece {str(wp)!r}: no such file")
+            raise ConfigError(
+                f"{where}: workpiece {str(wp)!r}: no such file and no built-in of that "
+                f"name ({', '.join(builtin_workpieces())})"
+            )
         from ..cutting import load_workpiece
 
         kt = float(load_workpiece(found).material.specific_thrust_pressure)
@@ -512,13 +528,8 @@ def _read_surface(path: Path) -> dict:
             if k in z:
                 out[k] = float(np.ravel(z[k])[0])
     else:
-        try:
-            from ..io import read_surface  # written by another engineer
-        except ImportError:
-            raise ConfigError(
-                f"{path}: only .npz surfaces (z, dx, dy) can be read "
-                "here (servosurf.io.read_surface is unavailable)"
-            ) from None
+        from ..io import read_surface
+
         s = read_surface(path)
         if s.dx is None or s.dy is None:
             raise ConfigError(f"{path}: the surface has no lateral calibration")

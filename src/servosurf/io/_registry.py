@@ -389,7 +389,7 @@ def read_profile(
         return Profile(obj.z.ravel(), step, metadata=dict(obj.metadata), x0=x0)
     raise UnsupportedFileFormatError(
         f"{_display(source)}: holds a {ny}x{nx} surface ({name}); expected a profile "
-        "(use read_surface)"
+        "(an Mx profile .csv or a one-row map); servosurf info describes maps"
     )
 
 

@@ -24,6 +24,7 @@ _LAZY = {
     "areal_parameters": "._areal", "areal_autocorrelation": "._areal",
     # spectra
     "psd_1d": "._spectrum", "find_peaks_spectrum": "._spectrum",
+    "sampling_alias_bands": "._spectrum",
     # lenslet form
     "nominal_lenslet_profile": "._form", "nominal_lenslet_surface": "._form",
     "form_error_profile": "._form", "lenslet_centre_profile": "._form",

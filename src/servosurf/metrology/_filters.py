@@ -219,8 +219,8 @@ def gaussian_filter_1d(
 def _surface_steps(surface: Surface) -> tuple[float, float]:
     if not surface.calibrated:
         raise ConfigError(
-            "surface must be laterally calibrated (dx and dy in m) to filter it with a "
-            "cut-off wavelength, got dx=None or dy=None"
+            "the map has no pixel size (a laterally uncalibrated file): filtering "
+            "with a cut-off wavelength needs one"
         )
     return float(surface.dx), float(surface.dy)  # type: ignore[arg-type]
 

@@ -442,7 +442,7 @@ def _target_grid(
         raise ConfigError(
             f"surface extent {nx_in * surface.dx:g} m x {ny_in * surface.dy:g} m "
             f"holds fewer than 2 x 2 instrument pixels of {p:g} m; use a larger "
-            "map or resample=False"
+            "field (field.nx, field.ny) or no instrument model (--instrument none)"
         )
     cx = surface.x0 + (nx_in - 1) * surface.dx / 2
     cy = surface.y0 + (ny_in - 1) * surface.dy / 2

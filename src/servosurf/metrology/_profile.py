@@ -383,6 +383,7 @@ def register_profiles(
     mirror: bool | Literal["auto"] = "auto",
     max_shift: float | None = None,
     min_overlap: float = MIN_OVERLAP,
+    shift_range: tuple[float, float] | None = None,
 ) -> ProfileRegistration:
     """Find the translation (and optional mirror) that best aligns two profiles.
 
@@ -404,6 +405,10 @@ def register_profiles(
     min_overlap : float, default: 0.9
         Smallest overlap accepted, as a fraction (0 .. 1] of the shorter profile's
         length.
+    shift_range : (float, float), optional
+        Only shifts ``lo <= shift <= hi`` are searched, in m (for example a
+        window around a shift found before); combined with ``max_shift`` when
+        both are given.
 
     Returns
     -------
@@ -433,6 +438,15 @@ def register_profiles(
         raise ConfigError(f"min_overlap must be in (0, 1], got {min_overlap!r}")
     if max_shift is not None:
         max_shift = check_positive(max_shift, name="max_shift")
+    if shift_range is not None:
+        if len(shift_range) != 2:
+            raise ConfigError(
+                f"shift_range must be (lo, hi) in m, got {shift_range!r}")
+        lo_s = check_finite(shift_range[0], name="shift_range lower bound")
+        hi_s = check_finite(shift_range[1], name="shift_range upper bound")
+        if not lo_s <= hi_s:
+            raise ConfigError(
+                f"shift_range must have lo <= hi, got [{lo_s:g}, {hi_s:g}] m")
     dx = ref.dx
     f = ref.z
     orientations = [False, True] if mirror == "auto" else [bool(mirror)]
@@ -460,6 +474,9 @@ def register_profiles(
                 src.x0 + 0.5 * (g.size - 1) * dx
             )
             allowed = np.abs(base + lags * dx - centre) <= max_shift + 1e-12 * dx
+        if shift_range is not None:
+            sh = base + lags * dx
+            allowed &= (sh >= lo_s - 1e-9 * dx) & (sh <= hi_s + 1e-9 * dx)
         lag, peak, j = _best_lag(ncc, lags, allowed)
         overlap = float(count[j] * dx) if j >= 0 else 0.0
         results.append((peak, base + lag * dx, mirrored, overlap))

@@ -60,7 +60,8 @@ def _roughness_profile(
         raise ConfigError(
             f"profile of length {profile.z.size * profile.dx:g} m leaves no valid "
             f"samples after filtering with cutoff {cutoff:g} m and trimming the ends; "
-            "use a shorter cutoff, a longer profile or trim_ends=False"
+            "use a shorter cut-off (--cutoff), a longer profile, or keep the ends "
+            "(--keep-ends)"
         )
     return r, ok
 
@@ -185,7 +186,7 @@ def iso4288_cutoff(
     if not allowed:
         raise ConfigError(
             f"profile length {length:g} m is shorter than twice the smallest ISO 4288 "
-            f"cut-off ({2 * ISO4288_CUTOFFS[0]:g} m); give cutoff explicitly"
+            f"cut-off ({2 * ISO4288_CUTOFFS[0]:g} m); give the cut-off (--cutoff)"
         )
     lc = 0.8e-3 if 0.8e-3 in allowed else allowed[-1]
     seen: list[float] = []
@@ -197,8 +198,8 @@ def iso4288_cutoff(
             value = res["rsm_m"]
             if not math.isfinite(value):
                 raise ConfigError(
-                    "cannot estimate RSm (fewer than two profile elements); use "
-                    "periodic=False or give cutoff explicitly"
+                    "cannot choose the ISO 4288 cut-off from RSm (fewer than two "
+                    "profile elements); give the cut-off (--cutoff)"
                 )
             new = _table_cutoff(value, _RSM_UPPER)
         else:

@@ -11,7 +11,7 @@ import scipy.signal
 from .._validation import check_array, check_in_range, check_positive
 from ..errors import ConfigError
 
-__all__ = ["psd_1d", "find_peaks_spectrum"]
+__all__ = ["psd_1d", "find_peaks_spectrum", "sampling_alias_bands"]
 
 #: Rows (profiles) with a larger fraction of NaN samples are skipped by psd_1d.
 MAX_NAN_FRACTION: float = 0.1
@@ -119,8 +119,9 @@ def psd_1d(
     use &= nan_frac < 1.0
     if not use.any():
         raise ConfigError(
-            f"every profile has more than {max_nan_fraction:.0%} invalid samples; "
-            "raise max_nan_fraction or crop the map"
+            f"every profile of the map has more than {max_nan_fraction:.0%} invalid "
+            "samples (it is mostly dropouts): crop the map to its valid region or "
+            "use a measurement with fewer dropouts"
         )
     data = np.array([_fill_nan_1d(r) for r in rows[use]])
     win = "boxcar" if window is None else window
@@ -253,3 +254,51 @@ def find_peaks_spectrum(
             item["temporal_freq_hz"] = fk * speed
         peaks.append(item)
     return peaks
+
+
+def sampling_alias_bands(
+    spacing, pitch: float, *, harmonics=(1, 2, 3)
+) -> list[dict[str, Any]]:
+    """Spatial frequencies at which a sampled tool path shows on a pixel grid.
+
+    A tool path sampled every ``spacing`` metres along the scan direction leaves a
+    periodic pattern at ``k / spacing`` (the samples and their harmonics); a pixel
+    grid of ``pitch`` folds it to ``|k / spacing - m / pitch|`` below the Nyquist
+    frequency ``1 / (2 pitch)``. In servosurf's surfaces this is the controller
+    rate: ``spacing = v / fs`` (0.21 um at 42.3 mm/s and 199.6 kHz on 0.55 um
+    pixels folds to about 720 mm^-1).
+
+    Parameters
+    ----------
+    spacing : float or array_like
+        Path sample spacing along the scan direction, m; an array spans the range
+        over the analysed region (the surface speed changes with the radius).
+    pitch : float
+        Pixel pitch along the scan direction, m.
+    harmonics : sequence of int, default: (1, 2, 3)
+        Harmonics ``k`` of the sampling frequency.
+
+    Returns
+    -------
+    list of dict
+        Per harmonic: ``harmonic``, ``low_per_m`` and ``high_per_m`` (1/m), the
+        band the fold of ``k / spacing`` covers over the ``spacing`` range.
+    """
+    s = np.atleast_1d(np.asarray(spacing, dtype=float))
+    if s.size == 0 or np.any(~np.isfinite(s)) or np.any(s <= 0):
+        raise ConfigError("spacing must be positive, finite sample spacings in m")
+    pitch = check_positive(pitch, name="pitch")
+    s = np.linspace(s.min(), s.max(), 65) if s.size > 1 else s
+    fp = 1.0 / pitch
+    out = []
+    for k in harmonics:
+        f = int(k) / s
+        a = np.abs(f - np.round(f / fp) * fp)
+        out.append(
+            {
+                "harmonic": int(k),
+                "low_per_m": float(a.min()),
+                "high_per_m": float(a.max()),
+            }
+        )
+    return out

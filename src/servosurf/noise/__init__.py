@@ -13,11 +13,16 @@ from ._psd import (
 from ._spindle import psd_series, realise_spindle_axial
 from ._stream import BLOCK, VibrationStream
 from ._study import (
+    LOOP_STATES,
     DesignStudy,
+    LoopLimit,
     design_study,
+    loop_limit,
+    loop_state,
     optimal_bandwidth,
     rms_at,
     stability_limit,
+    tuning_limit,
 )
 from ._synthesis import SOURCES, ErrorBudget, Realisation, cas, realise, synthesize
 
@@ -38,6 +43,11 @@ __all__ = [
     "optimal_bandwidth",
     "rms_at",
     "stability_limit",
+    "tuning_limit",
+    "loop_limit",
+    "loop_state",
+    "LoopLimit",
+    "LOOP_STATES",
     "SOURCES",
     "ErrorBudget",
     "Realisation",

@@ -27,7 +27,9 @@ def _common_grid(a: Surface, b: Surface) -> tuple[Surface, Surface]:
     dx, dy = max(a.dx, b.dx), max(a.dy, b.dy)
 
     def to(s: Surface) -> Surface:
-        if np.isclose(s.dx, dx, rtol=1e-9) and np.isclose(s.dy, dy, rtol=1e-9):
+        if np.isclose(s.dx, dx, rtol=1e-9, atol=0.0) and np.isclose(
+            s.dy, dy, rtol=1e-9, atol=0.0
+        ):  # no absolute tolerance: pixel sizes are ~1e-7 m
             return s
         return resample(s, dx, dy)
 

@@ -1,6 +1,7 @@
 """Whole-workpiece runs and many-task studies: tiling, chunked Zarr output, dask.
 
-Needs the ``scale`` extra (``zarr``, ``dask[distributed]``), imported on use.
+zarr is a dependency (the face's output array); dask (``distributed``, the
+``scale`` extra) is needed only to run tasks on a cluster, imported on use.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from ._face import (
     chunk_slices,
     compute_tile,
     face_field,
+    face_preview,
+    grid_attributes,
     simulate_face,
 )
 from ._memory import reuse_freed_memory
@@ -21,6 +24,8 @@ __all__ = [
     "simulate_face",
     "compute_tile",
     "face_field",
+    "face_preview",
+    "grid_attributes",
     "chunk_slices",
     "FaceResult",
     "IndexNoise",

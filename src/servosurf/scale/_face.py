@@ -30,7 +30,7 @@ from ..toolpath._tool import Field
 from ._memory import reuse_freed_memory
 
 __all__ = ["face_field", "simulate_face", "compute_tile", "FaceResult", "chunk_slices",
-           "IndexNoise"]
+           "IndexNoise", "face_preview", "grid_attributes"]
 
 #: Split a tile until its windowed path has at most this many samples (memory).
 MAX_TILE_SAMPLES = 4_000_000
@@ -218,7 +218,9 @@ def compute_tile(spec: ToolpathSpec, field: Field, rows: tuple[int, int],
                 below = -(path.z.min() - z_floor)
                 raise ConfigError(
                     f"the deviation takes the tool {below:.3g} m below the commanded "
-                    f"depth plus depth_margin ({depth_margin:g} m); raise depth_margin"
+                    f"depth plus the {depth_margin:g} m margin: a vibration that "
+                    "large is implausible (servosurf face: check --bandwidth and "
+                    "--mass, or --no-vibration; Python: raise depth_margin)"
                 )
             prep = prepare_path(path, tool, field, rows=rows, cols=cols, crop=False)
             if prep is None:
@@ -364,6 +366,7 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
     t0 = time.perf_counter()
     reuse_freed_memory()
     arr = _open_array(store, field.shape, chunk, "w")
+    arr.attrs.update(grid_attributes(field, face_radius=face_radius, kind=spec.kind))
     tasks = chunk_slices(field.shape, chunk)
     kw = dict(initial=initial, face_radius=face_radius, deviation=deviation,
               depth_margin=depth_margin, fs=fs, max_tile_samples=max_tile_samples)
@@ -404,3 +407,116 @@ def simulate_face(spec: ToolpathSpec, store: Any, *, field: Field | None = None,
                 cl.close()
     return FaceResult(array=arr, field=field, seconds=time.perf_counter() - t0,
                       n_points=n_points, n_samples=n_samples, n_tasks=len(tasks))
+
+
+def grid_attributes(field: Field, *, face_radius: float | None = None,
+                    kind: str = "") -> dict[str, Any]:
+    """Metadata stored with a height array: unit, pixel size, origin, axes.
+
+    Parameters
+    ----------
+    field : Field
+        The grid of the array.
+    face_radius : float, optional
+        Face radius in m (pixels beyond it are NaN).
+    kind : str, optional
+        Toolpath kind.
+
+    Returns
+    -------
+    dict
+        JSON-ready attributes, every length in m: ``unit`` ("m", the heights),
+        ``dx_m``/``dy_m`` (pixel size along columns/rows), ``x0_m``/``y0_m`` (centre
+        of pixel (0, 0) in the workpiece frame, spindle axis at (0, 0)), ``axes``
+        (rows are y, columns are x) and ``invalid`` (NaN: not cut or off the face).
+    """
+    attrs: dict[str, Any] = {
+        "unit": "m",
+        "dx_m": float(field.pitch_x),
+        "dy_m": float(field.pitch_y),
+        "x0_m": float(field.x0),
+        "y0_m": float(field.y0),
+        "axes": ["y", "x"],
+        "origin": "x0_m, y0_m: centre of pixel (0, 0); pixel (i, j) at "
+                  "(x0_m + j dx_m, y0_m + i dy_m); the spindle axis is at (0, 0)",
+        "invalid": "NaN (not cut, or off the face)",
+        "writer": "servosurf",
+    }
+    if face_radius is not None:
+        attrs["face_radius_m"] = float(face_radius)
+    if kind:
+        attrs["toolpath_kind"] = kind
+    return attrs
+
+
+def face_preview(array: Any, *, max_pixels: int = 1000,
+                 window: int = 1024) -> tuple[np.ndarray, int, dict[str, float]]:
+    """Area-averaged preview of a (chunked) height array and its statistics.
+
+    Each preview pixel is the mean of the valid heights of a ``step`` x ``step``
+    block (NaN when fewer than half of the block's pixels are valid), so the
+    preview shows the surface instead of a moire of every ``step``-th pixel. The
+    array is read in windows of about ``window`` x ``window`` pixels (bounded
+    memory); the same pass gives the statistics of every valid pixel.
+
+    Parameters
+    ----------
+    array : array-like of shape (ny, nx)
+        Heights in m (a zarr array, or any array sliced as ``a[r0:r1, c0:c1]``).
+    max_pixels : int, default: 1000
+        Largest preview side, in pixels.
+    window : int, default: 1024
+        Read window side, in pixels (rounded to a multiple of ``step``).
+
+    Returns
+    -------
+    preview : ndarray of shape (ceil(ny / step), ceil(nx / step))
+        Block means in m. Block (I, J) covers pixels ``I*step .. I*step+step-1``
+        (rows) and the same for columns: its centre lies (step - 1) / 2 pixels
+        beyond the first pixel's.
+    step : int
+        Block side, ``ceil(max(ny, nx) / max_pixels)``.
+    stats : dict
+        ``valid_points``, ``mean_m``, ``sq_m`` (RMS about the mean), ``min_m``,
+        ``max_m`` over every valid pixel (m; NaN without valid pixels).
+    """
+    ny, nx = (int(v) for v in array.shape)
+    step = max(1, math.ceil(max(ny, nx) / int(max_pixels)))
+    win = step * max(1, int(window) // step)
+    out = np.full((math.ceil(ny / step), math.ceil(nx / step)), np.nan)
+    ref = None
+    n, s1, s2 = 0, 0.0, 0.0
+    zmin, zmax = math.inf, -math.inf
+    for r0 in range(0, ny, win):
+        for c0 in range(0, nx, win):
+            z = np.asarray(array[r0:r0 + win, c0:c0 + win], dtype=float)
+            ok = np.isfinite(z)
+            if not ok.any():
+                continue
+            v = z[ok]
+            if ref is None:
+                ref = float(v[0])  # sums about it: no cancellation on a deep face
+            d = v - ref
+            n += v.size
+            s1 += float(d.sum())
+            s2 += float(np.dot(d, d))
+            zmin, zmax = min(zmin, float(v.min())), max(zmax, float(v.max()))
+            hy, hx = z.shape
+            by, bx = math.ceil(hy / step), math.ceil(hx / step)
+            pad = ((0, by * step - hy), (0, bx * step - hx))
+            total = np.pad(np.where(ok, z, 0.0), pad).reshape(by, step, bx, step)
+            count = np.pad(ok, pad).reshape(by, step, bx, step).sum(axis=(1, 3))
+            area = np.pad(np.ones_like(ok), pad).reshape(by, step, bx, step)
+            area = area.sum(axis=(1, 3))
+            block = total.sum(axis=(1, 3)) / np.maximum(count, 1)
+            i0, j0 = r0 // step, c0 // step
+            out[i0:i0 + by, j0:j0 + bx] = np.where(2 * count >= area, block, np.nan)
+    if n:
+        mean = s1 / n
+        stats = {"valid_points": n, "mean_m": ref + mean,
+                 "sq_m": math.sqrt(max(s2 / n - mean * mean, 0.0)),
+                 "min_m": zmin, "max_m": zmax}
+    else:
+        stats = {"valid_points": 0, "mean_m": math.nan, "sq_m": math.nan,
+                 "min_m": math.nan, "max_m": math.nan}
+    return out, step, stats

@@ -14,6 +14,7 @@ from ._ident import (
 )
 from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, tune_pidf
 from ._machine import (
+    PROVENANCE_KINDS,
     Actuator,
     Controller,
     Disturbances,
@@ -37,6 +38,7 @@ from ._plant import Plant, paper_eq_frf, plant_from_machine
 __all__ = [
     "AxisModel",
     "AXIS_MODELS",
+    "PROVENANCE_KINDS",
     "Actuator",
     "Controller",
     "Disturbances",

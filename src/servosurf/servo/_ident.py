@@ -138,13 +138,28 @@ def get_param(machine: Machine, key: str) -> float:
         raise ConfigError(f"machine parameter {key!r} is not numeric") from None
 
 
+#: Provenance label of a number replaced by :func:`set_param` (a fit's value).
+SET_PARAM_LABEL = "derived: set by a fit (servosurf.servo.set_param), not calibrated"
+
+
 def set_param(machine: Machine, key: str, value: float) -> Machine:
-    """Copy of ``machine`` with one dotted parameter replaced."""
+    """Copy of ``machine`` with one dotted parameter replaced.
+
+    The parameter's provenance label (if the machine has a ``[provenance]`` table)
+    becomes :data:`SET_PARAM_LABEL`: the built-in's label described its own value.
+    """
     sec, name = _split(key)
     section = getattr(machine, sec)
-    return dataclasses.replace(
+    out = dataclasses.replace(
         machine, **{sec: dataclasses.replace(section, **{name: value})}
     )
+    if machine.provenance:
+        dotted = f"{sec}.{name}".replace("_", "-")
+        prov = dict(machine.provenance)
+        if dotted in prov:
+            prov[dotted] = SET_PARAM_LABEL
+            out = dataclasses.replace(out, provenance=tuple(sorted(prov.items())))
+    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -12,8 +12,19 @@ Decisions recorded here (see also the module docstrings of ``_plant`` and ``_loo
 * The sensor is fixed to the coil carrier (m2) as the paper's text says; Eq 7's ``x1``
   is available as ``sensor.location = "tool"``.
 * "Moving mass" means m1 + m2 (paper section 3.3). Extra mass (the glued steel blocks)
-  is added to ``mechanics.added-mass-on`` (m2 by default: the blocks are glued to the
-  tool holder, which is part of the rigid coil-carrier body).
+  is added to ``mechanics.added-mass-on``. A file that omits the key puts it on m2
+  (a tool holder that is part of the rigid coil-carrier body); the built-in
+  ``seed-prototype`` puts it on m1, the tool body, as the paper's "steel blocks glued
+  onto the tool holder" (4.1) reads, and only that placement gives the paper's
+  measured instability above 1.6 kHz at 0.175 kg: with the blocks on m2 the loop
+  stays stable (16.8 dB of gain margin at 1448 Hz) until the tuning rule runs out of
+  positive gains. ``servosurf paper`` reports both placements and the pole that
+  leaves the unit circle (the 11.7 kHz appendage mode, not the tool mode).
+* Every number of a machine file may carry a provenance label in its
+  ``[provenance]`` table (``paper: ...``, ``assumed: ...``, ``derived: ...``,
+  ``target:<figure keys>``); the built-in file is written by
+  :func:`servosurf.calibration.calibrate`, and ``servosurf machines --describe``
+  prints the same labels.
 """
 
 from __future__ import annotations
@@ -41,6 +52,7 @@ __all__ = [
     "builtin_machines",
     "describe_machine",
     "MINUS_3DB_DOUBLE_POLE",
+    "PROVENANCE_KINDS",
 ]
 
 #: -3 dB frequency of 1/(1 + s/w)^2 relative to w: sqrt(sqrt(2) - 1).
@@ -407,6 +419,11 @@ class Machine:
     # tool Z axis: the FTS loop above (default), a second-order axis or none
     axis: AxisModel = param(default_factory=AxisModel)
     spindle: Spindle = param(default_factory=Spindle)
+    provenance: tuple[tuple[str, str], ...] = param(
+        default_factory=tuple,
+        doc="[provenance] table: dotted key -> 'paper: ...', 'assumed: ...', "
+        "'derived: ...' or 'target:<figures>'",
+    )
     path: str = param("", doc="file this machine was read from (set by the loader)")
 
     def with_moving_mass(self, mass: float) -> Machine:
@@ -468,6 +485,9 @@ class Machine:
         """
         m = to_mapping(self)
         m.pop("path", None)
+        prov = m.pop("provenance", None)
+        if prov:
+            m["provenance"] = {k: v for k, v in prov}
         return m
 
 
@@ -494,6 +514,20 @@ def _resolve_csv(machine: Machine, base: Path) -> Machine:
         ),
         spindle=spindle,
     )
+
+
+def _dotted_keys(data: dict, prefix: str = "") -> list[str]:
+    """Dotted keys of a TOML mapping's leaves (tables of tables flattened)."""
+    out = []
+    for k, v in data.items():
+        key = f"{prefix}.{k}" if prefix else str(k)
+        if key == "provenance":
+            continue
+        if isinstance(v, dict):
+            out.extend(_dotted_keys(v, key))
+        else:
+            out.append(key)
+    return out
 
 
 def _merge(base: dict, over: dict) -> dict:
@@ -563,7 +597,23 @@ def load_machine(source: str | Path | None = None) -> Machine:
         seen.add(parent)
         base = load_toml(builtins[parent])
         parent = base.pop("inherit", None)
+        # a number the file changes loses the built-in's provenance label (the label
+        # described the built-in's value), unless the file labels it itself
+        own = set(_dotted_keys(data)) - set(data.get("provenance") or {})
+        if isinstance(base.get("provenance"), dict):
+            base["provenance"] = {
+                k: v for k, v in base["provenance"].items() if k not in own
+            }
         data = _merge(base, data)
+    prov = data.get("provenance")
+    if prov is not None:
+        if not isinstance(prov, dict) or not all(
+            isinstance(v, str) for v in prov.values()
+        ):
+            raise ConfigError(
+                f"{path}: [provenance] must map dotted keys to label strings"
+            )
+        data["provenance"] = sorted([str(k), v] for k, v in prov.items())
     try:
         machine = from_mapping(Machine, data)
     except ConfigError as exc:
@@ -572,9 +622,76 @@ def load_machine(source: str | Path | None = None) -> Machine:
     return _resolve_csv(machine, Path(path).parent)
 
 
-def describe_machine() -> list[dict]:
+#: Provenance labels start with one of these kinds.
+PROVENANCE_KINDS = ("paper", "assumed", "derived", "target")
+
+
+def describe_machine(machine: Machine | None = None) -> list[dict]:
     """Return the documented parameter list of a machine file.
 
-    Each entry gives the key, unit, doc and source.
+    Parameters
+    ----------
+    machine : Machine, optional
+        Machine whose values and provenance to list (default: the built-in
+        ``seed-prototype``).
+
+    Returns
+    -------
+    list of dict
+        One entry per key: ``key``, ``unit``, ``doc``, ``value`` (the machine's),
+        ``provenance`` (the label of the machine file's ``[provenance]`` table: the
+        same text as there), ``default`` (the generic default of a file that omits
+        the key) and ``source`` (where that generic default comes from). The
+        alternative disturbance sets follow, under
+        ``alternative-disturbances.<name>.``.
     """
-    return describe(Machine)
+    from ..config import to_mapping
+
+    if machine is None:
+        machine = load_machine()
+    prov = dict(machine.provenance)
+    flat: dict = {}
+
+    def walk(obj: dict, prefix: str) -> None:
+        for k, v in obj.items():
+            key = f"{prefix}.{k}" if prefix else k
+            if isinstance(v, dict):
+                walk(v, key)
+            else:
+                flat[key] = v
+
+    mapping = to_mapping(machine)
+    alts = mapping.pop("alternative-disturbances", [])
+    mapping.pop("provenance", None)
+    walk(mapping, "")
+    rows = []
+    for r in describe(Machine):
+        if r["key"] in ("provenance", "alternative-disturbances", "path"):
+            continue
+        rows.append(
+            {**r, "value": flat.get(r["key"]), "provenance": prov.get(r["key"], "")}
+        )
+    sub = {
+        r["key"][len("disturbances."):]: r
+        for r in describe(Disturbances, prefix="disturbances")
+    }
+    for alt in alts:
+        name = alt.get("name", "?")
+        aflat: dict = {}
+        for k, v in alt.items():
+            if isinstance(v, dict):
+                for kk, vv in v.items():
+                    aflat[f"{k}.{kk}"] = vv
+            else:
+                aflat[k] = v
+        for k, r in sub.items():
+            key = f"alternative-disturbances.{name}.{k}"
+            rows.append(
+                {
+                    **r,
+                    "key": key,
+                    "value": aflat.get(k),
+                    "provenance": prov.get(key, ""),
+                }
+            )
+    return rows

@@ -52,6 +52,27 @@ Processing (all lengths in m, angles in rad)
    wavelength), evaluated as a normalised (Nadaraya-Watson) kernel average at
    angles spaced ``angle_step`` (default 0.25 degree) across the usable arc.
 
+Which model when the path compensates the edge
+-----------------------------------------------
+Sweep the whole measured edge (the default), whether or not the path was planned
+to compensate it. A compensating planner (like the one that wrote case 1022)
+moves the tool along Z by the edge's deviation at the *contact point* of each
+radius, so that the part's form follows the design; the surface between two
+passes is still the imprint of the edge *around* that point (about +-f / (2 R)
+of contact angle, +-4.4 degrees on 1022), which sets the cusps' shape and
+height. ``compensated=True`` (``--edge-compensated``, TOML ``edge-compensated``)
+is the *radius-only* model: a round nose of the fitted radius, the edge's shape
+left out. It is kept as a model to compare with. On case 1022
+(``benchmarks/real_cut_1022.py``) every round nose (186.4 to 191.8 um, and the
+trace's 188.3 um) over-predicts Ra, by 13-16 % on the white-light profile and
+33-37 % on the Formtracer contour (by 20-45 % in every 0.1 mm of radius);
+the swept trace brings the contour to +13 % (within 10 % over radii below
+0.4 mm) and Rz to -4 % / +18 % (round nose +22 % / +43 %), but puts the
+white-light profile's Ra 13 % low; its result depends on which side of the trace
+is outward (``mirror``), which the trace cannot tell: the default orientation
+fits the contour much better than the mirrored one (+13 % against +53 %) and the
+white-light profile as well (-13 % against +13 %).
+
 Tool convention
 ---------------
 The result is what :class:`~servosurf.toolpath.Tool` uses: ``nose_radius`` = the
@@ -261,9 +282,11 @@ class ToolEdge:
             Tool whose rake and clearance angles are kept (default: a default
             Tool).
         compensated : bool, default: False
-            The path already compensates this measured edge: only the fitted
-            radius enters, not the deviation, so the sweep does not apply it a
-            second time.
+            The radius-only model: only the fitted radius enters, not the
+            deviation (a round nose). Not what a path that compensates this edge
+            needs: the compensation is in the path's Z, the cusps are still
+            imprints of the edge's shape (see "Which model" in the module
+            docstring); kept to compare with.
         arc_half_angle : float, optional
             Arc half-angle in rad; default :attr:`arc_half_angle` (the usable arc).
 
@@ -907,7 +930,9 @@ class MeasuredEdge:
     edge : ToolEdge
         The fitted trace.
     compensated : bool, default: False
-        The path already compensates this edge: only the radius enters.
+        Radius-only model: only the fitted radius enters, not the edge's shape
+        (see "Which model" in the module docstring: sweeping the shape is right
+        for compensating paths too).
 
     Notes
     -----
@@ -990,8 +1015,9 @@ def tool_table_from_trace(
 
     Notes
     -----
-    Keys: ``edge-trace`` (file name), ``edge-compensated`` (bool, default false:
-    the path already compensates this edge, only the radius enters),
+    Keys: ``edge-trace`` (file name), ``edge-compensated`` (bool, default false;
+    true: the radius-only model, the edge's shape left out, which a path that
+    compensates the edge does not need, see the module docstring),
     ``edge-mirror`` (bool, default false), ``edge-unit`` (default ``"mm"``),
     ``edge-half-angle`` (rad) or ``edge-half-angle-deg`` (degree), and
     ``edge-smoothing`` (m).

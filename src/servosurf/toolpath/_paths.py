@@ -34,6 +34,7 @@ __all__ = [
     "LensletToolpath",
     "ToolpathSpec",
     "load_toolpath",
+    "builtin_toolpaths",
     "toolpath_from_mapping",
     "lenslet_chord",
     "lenslet_cut_fraction",
@@ -224,14 +225,18 @@ class FacingToolpath(_ConstantSpeedPath):
     """
 
     feed_per_rev: float = param(2e-6, unit="m", doc="radial feed per revolution",
-                                source="seed paper Table 2", low=0.0, low_open=True)
+                                source="seed paper Table 2", low=0.0, low_open=True,
+                                plausible=(1e-9, 1e-3))
     spindle_speed: float = param(250.0 / 60.0, unit="rev/s", doc="spindle speed",
                                  source="seed paper Table 2 (250 rpm)", low=0.0,
-                                 low_open=True)
-    r_start: float = param(5.5e-3, unit="m", doc="start radius", low=0.0)
-    r_end: float = param(4.5e-3, unit="m", doc="end radius", low=0.0)
+                                 low_open=True, plausible=(1e-3, 2000.0))
+    r_start: float = param(5.5e-3, unit="m", doc="start radius", low=0.0,
+                           plausible=(0.0, 1.0))
+    r_end: float = param(4.5e-3, unit="m", doc="end radius", low=0.0,
+                         plausible=(0.0, 1.0))
     depth_of_cut: float = param(5e-6, unit="m", doc="depth of cut below z = 0",
-                                source="seed paper Table 2", low=0.0)
+                                source="seed paper Table 2", low=0.0,
+                                plausible=(0.0, 1e-3))
     theta_start: float = param(0.0, unit="rad", doc="tool angle at t = 0")
 
     def __post_init__(self) -> None:
@@ -323,19 +328,23 @@ class LensletToolpath(_ConstantSpeedPath):
         Radial distance between rings, in m (rings step inward).
     """
 
-    frequency: float = param(100.0, unit="Hz", doc="sinusoid frequency",
-                             source="seed paper Table 2", low=0.0, low_open=True)
-    amplitude: float = param(10e-6, unit="m", doc="zero-to-peak tool amplitude",
-                             source="seed paper Table 2", low=0.0, low_open=True)
+    frequency: float = param(100.0, unit="Hz", doc="FTS sinusoid frequency",
+                             source="seed paper Table 2", low=0.0, low_open=True,
+                             plausible=(1e-2, 5e4))
+    amplitude: float = param(10e-6, unit="m", doc="FTS zero-to-peak amplitude",
+                             source="seed paper Table 2", low=0.0, low_open=True,
+                             plausible=(1e-9, 5e-3))
     depth_of_cut: float = param(5e-6, unit="m", doc="lenslet depth",
-                                source="seed paper Table 2", low=0.0, low_open=True)
+                                source="seed paper Table 2", low=0.0, low_open=True,
+                                plausible=(1e-9, 5e-3))
     surface_speed: float = param(42.3e-3, unit="m/s", doc="nominal surface speed",
                                  source="seed paper section 5.3 (cut length = width)",
-                                 low=0.0, low_open=True)
+                                 low=0.0, low_open=True, plausible=(1e-5, 100.0))
     ring_radius: float = param(10e-3, unit="m", doc="radius of the first ring",
-                               low=0.0, low_open=True)
+                               low=0.0, low_open=True, plausible=(1e-5, 1.0))
     ring_count: int = param(3, doc="number of rings", low=1)
-    ring_pitch: float = param(0.2e-3, unit="m", doc="radial ring pitch", low=0.0)
+    ring_pitch: float = param(0.2e-3, unit="m", doc="radial ring pitch", low=0.0,
+                              plausible=(0.0, 0.1))
 
     def __post_init__(self) -> None:
         lenslet_cut_fraction(self.amplitude, self.depth_of_cut)  # checks d <= 2 A
@@ -600,9 +609,20 @@ def _tool_from_table(tool_tab: dict[str, Any], base_dir: str | Path | None) -> T
     return from_mapping(Tool, tool_tab, prefix="tool")
 
 
+def builtin_toolpaths() -> dict[str, Path]:
+    """Return ``{name: path}`` of the toolpath files shipped with servosurf.
+
+    The names work wherever a toolpath path does (``load_toolpath("lenslet_5um")``,
+    ``servosurf simulate lenslet_5um``); ``servosurf toolpaths`` lists them.
+    """
+    from .._builtins import builtin_files
+
+    return builtin_files("toolpath")
+
+
 def load_toolpath(path: str | Path, *, nose_radius: float | None = None,
                   nc_overrides: Mapping[str, Any] | None = None) -> ToolpathSpec:
-    """Read a toolpath TOML file (``toolpaths/*.toml``).
+    """Read a toolpath TOML file (``toolpaths/*.toml``) or a built-in by name.
 
     Parameters
     ----------
@@ -611,7 +631,8 @@ def load_toolpath(path: str | Path, *, nose_radius: float | None = None,
         ``[facing]``, ``[lenslet]`` or ``[nc]`` table or the ``[surface]`` and
         ``[spiral]`` tables of a design surface
         (:func:`~servosurf.toolpath.design_toolpath_from_mapping`), ``[tool]`` and
-        ``[field]``.
+        ``[field]``; or the name of a built-in toolpath (see
+        :func:`builtin_toolpaths`), e.g. ``"lenslet_5um"``.
     nose_radius : float, optional
         Tool nose radius in m replacing the file's.
     nc_overrides : Mapping, optional
@@ -627,6 +648,8 @@ def load_toolpath(path: str | Path, *, nose_radius: float | None = None,
     ConfigError
         If the file is missing, not TOML, or has unknown keys or bad values.
     """
-    p = Path(path)
+    from .._builtins import resolve_file
+
+    p = resolve_file(path, kind="toolpath")
     return toolpath_from_mapping(load_toml(p), base_dir=p.parent,
                                  nose_radius=nose_radius, nc_overrides=nc_overrides)

@@ -413,9 +413,9 @@ def sample(spec: ToolpathSpec | FacingToolpath | LensletToolpath | Any, *,
     n = int((stops - starts).sum())
     if n > max_samples:
         raise ConfigError(
-            f"sampling would give {n} samples (> max_samples = {max_samples}); pass "
-            "field= or t_window= to sample only what a field needs, use a smaller "
-            "reach, or raise max_samples"
+            f"sampling would give {n} samples, more than {max_samples}: use a "
+            "smaller field (field.nx, field.ny) or a shorter toolpath (Python: pass "
+            "field= or t_window=, or raise max_samples)"
         )
     if starts.size > 1 and np.any(starts[1:] < stops[:-1]):  # overlapping windows
         idx = np.unique(_ranges_to_index(starts, stops))

@@ -252,6 +252,10 @@ def prepare_path(path: SampledPath, tool: Tool, field: Field, *,
     ConfigError
         With ``check``: on a non-finite or non-monotonic path or a negative radius.
     """
+    from ..kernels._notice import compile_notice
+    from ..kernels._sweep import _sweep_pruned
+
+    compile_notice(_sweep_pruned, "surface kernel")  # once, before a slow first call
     rows = (0, field.ny) if rows is None else rows
     cols = (0, field.nx) if cols is None else cols
     reach = tool.half_width

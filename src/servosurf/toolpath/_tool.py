@@ -67,7 +67,8 @@ class Tool:
     """
 
     nose_radius: float = param(0.5e-3, unit="m", doc="nose radius R",
-                               source="seed paper Table 2", low=0.0, low_open=True)
+                               source="seed paper Table 2", low=0.0, low_open=True,
+                               plausible=(1e-7, 0.05))
     rake_angle: float = param(0.0, unit="rad", doc="rake angle",
                               source="seed paper Table 2 (0 degree)",
                               low=-math.pi / 2, high=math.pi / 2)
@@ -265,13 +266,15 @@ class Field:
 
     pitch_x: float = param(0.55e-6, unit="m", doc="grid pitch along x (columns)",
                            source="20X objective, 640 px over 0.352 mm",
-                           low=0.0, low_open=True)
+                           low=0.0, low_open=True, plausible=(1e-9, 1e-3))
     pitch_y: float = param(0.55e-6, unit="m", doc="grid pitch along y (rows)",
-                           low=0.0, low_open=True)
+                           low=0.0, low_open=True, plausible=(1e-9, 1e-3))
     nx: int = param(640, doc="number of columns", low=1)
     ny: int = param(480, doc="number of rows", low=1)
-    center_x: float = param(5e-3, unit="m", doc="x of the field centre")
-    center_y: float = param(0.0, unit="m", doc="y of the field centre")
+    center_x: float = param(5e-3, unit="m", doc="x of the field centre",
+                            plausible=(-1.0, 1.0))
+    center_y: float = param(0.0, unit="m", doc="y of the field centre",
+                            plausible=(-1.0, 1.0))
 
     def __post_init__(self) -> None:
         for name in ("nx", "ny"):

@@ -1008,7 +1008,8 @@ def nc_spec_from_mapping(data: Mapping[str, Any], *,
     if nose_radius is not None:
         tool_tab.pop("nose_radius", None)
         tool_tab["nose-radius"] = float(nose_radius)
-    if "nose-radius" not in tool_tab and "nose_radius" not in tool_tab:
+    if not any(k in tool_tab for k in ("nose-radius", "nose_radius", "edge-trace")):
+        # (a measured edge trace gives the radius)
         if prog.tool_radius is None:
             raise ConfigError(
                 f"{prog.source}: the program states no tool nose radius: give "

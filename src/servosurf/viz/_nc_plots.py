@@ -95,8 +95,11 @@ def plot_band_map(surface, path, out: str | Path, *, title: str = "") -> Path:
     fig, ax = figure(2, 1, figsize=(10, 4.6), sharex=True)
     finite = res[np.isfinite(res)]
     lo, hi = (np.percentile(finite, [1, 99]) * 1e9) if finite.size else (0, 1)
+    # pixel edges: a one-row band keeps a height of one pitch
+    hy = 0.5 * (surface.dy or 0.0)
     im = ax[0].imshow(res * 1e9, aspect="auto", cmap="viridis", vmin=lo, vmax=hi,
-                      extent=[x[0] * 1e3, x[-1] * 1e3, y[-1] * 1e6, y[0] * 1e6],
+                      extent=[x[0] * 1e3, x[-1] * 1e3, (y[-1] + hy) * 1e6,
+                              (y[0] - hy) * 1e6],
                       interpolation="nearest")
     ax[0].set_ylabel("y [\u00b5m]")
     ax[0].set_title("height minus the commanded tip path and a quadratic in x [nm]")

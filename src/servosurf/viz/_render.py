@@ -126,8 +126,16 @@ def _scene(
         exag = _nice_floor(AUTO_RELIEF * extent / ptp_um) if ptp_um > 0 else 1.0
     else:
         exag = z_exaggeration
-    points = np.column_stack([xyz[:, 0] * lateral, xyz[:, 1] * lateral, h * 1e6 * exag])
+    # lateral axes about the map centre: short tick labels (a field 10 mm off the
+    # spindle axis would otherwise read 1.006e+04 um)
+    centre = [0.5 * (xyz[:, i].min() + xyz[:, i].max()) for i in (0, 1)]
+    if not surface.calibrated or max(abs(c) for c in centre) < 10 * extent / lateral:
+        centre = [0.0, 0.0]
+    points = np.column_stack([(xyz[:, 0] - centre[0]) * lateral,
+                              (xyz[:, 1] - centre[1]) * lateral, h * 1e6 * exag])
     ztitle = f"z (um, drawn x{exag:g})" if exag != 1 else "z (um)"
+    xtitle, ytitle = (f"{a} - {c * 1e3:.4g} mm ({unit})" if c else f"{a} ({unit})"
+                      for a, c in zip("xy", centre, strict=True))
     # axis label ranges in true units (the drawn z is exaggerated)
     ranges = [
         float(points[:, 0].min()),
@@ -142,12 +150,39 @@ def _scene(
         "faces": faces,
         "height_nm": h * 1e9,
         "exaggeration": exag,
-        "xtitle": f"x ({unit})",
-        "ytitle": f"y ({unit})",
+        "xtitle": xtitle,
+        "ytitle": ytitle,
         "ztitle": ztitle,
         "bar_title": "z - mean (nm)",
         "axes_ranges": ranges,
     }
+
+
+def _add_rulers(pl: Any, scene: dict[str, Any]) -> None:
+    """Scale rulers along two front edges and one vertical edge of the mesh.
+
+    Three separate rulers instead of a bounding box's axes: the box puts the end
+    labels of all three axes on its shared corners, where they overlap. Each ruler
+    reads from 0 at its start, in um (the z ruler in true um: the drawn height is
+    divided by the exaggeration).
+    """
+    p = scene["points"]
+    (x0, y0, z0), (x1, y1, z1) = p.min(axis=0), p.max(axis=0)
+    gap = 0.1 * max(x1 - x0, y1 - y0)
+    unit = scene["xtitle"].rsplit("(", 1)[-1].rstrip(")")
+    common = {"font_size_factor": 0.55, "label_color": "black",
+              "tick_color": "black", "number_minor_ticks": 1}
+    # isometric view from (+x, +y, +z): the edges at y = y1 and x = x1 face it
+    pl.add_ruler([x0, y1 + gap, z0], [x1, y1 + gap, z0], title=f"x ({unit})",
+                 number_labels=3, label_format="%.0f", **common)
+    pl.add_ruler([x1 + gap, y0, z0], [x1 + gap, y1, z0], title=f"y ({unit})",
+                 number_labels=3, label_format="%.0f", **common)
+    if z1 > z0:  # at the left corner, away from the colour bar
+        nm = (z1 - z0) / scene["exaggeration"] < 0.1  # drawn in um
+        pl.add_ruler([x1 + gap, y0 - gap, z0], [x1 + gap, y0 - gap, z1],
+                     title="", number_labels=2,
+                     label_format="z %.3g nm" if nm else "z %.3g um",
+                     scale=(1e3 if nm else 1.0) / scene["exaggeration"], **common)
 
 
 def _render_pyvista(
@@ -187,20 +222,12 @@ def _render_pyvista(
                     "n_labels": 5,
                 },
             )
-            pl.show_bounds(
-                xtitle=scene["xtitle"],
-                ytitle=scene["ytitle"],
-                ztitle=scene["ztitle"],
-                color="black",
-                location="outer",
-                n_xlabels=4,
-                n_ylabels=4,
-                n_zlabels=2,
-                fmt="%.4g",
-                axes_ranges=scene["axes_ranges"],
-            )
-            if title:
-                pl.add_text(title, position="upper_edge", font_size=12, color="black")
+            _add_rulers(pl, scene)
+            exag = scene["exaggeration"]
+            text = "\n".join(t for t in (
+                title, f"heights drawn x{exag:g}" if exag != 1 else "") if t)
+            if text:
+                pl.add_text(text, position="upper_edge", font_size=12, color="black")
             pl.view_isometric()
             pl.camera.zoom(0.9)  # leave room for the colour bar
             pl.screenshot(str(tmp))

@@ -15,6 +15,7 @@ __all__ = [
     "plot_error_spectra",
     "plot_power_shares",
     "plot_loop_bode",
+    "plot_tool_frfs",
 ]
 
 _SRC_LABEL = {
@@ -27,10 +28,69 @@ _SRC_LABEL = {
 }
 
 
-def plot_loop_bode(frfs: dict, path: str | Path) -> Path:
-    """Bode plot of every closed-loop path to the tool, one line style per mass.
+def plot_loop_bode(frfs: dict, path: str | Path, margins: dict | None = None) -> Path:
+    """Bode plot of the open loop L per mass, with |S| and |T| and the margins.
 
-    ``frfs`` maps a label (e.g. "0.175 kg") to a :class:`~servosurf.servo.LoopFRF`.
+    Parameters
+    ----------
+    frfs : dict
+        Label (e.g. "0.175 kg") -> :class:`~servosurf.servo.LoopFRF` (its ``loop``
+        is the open-loop gain L, dimensionless).
+    path : str or Path
+        Output PNG.
+    margins : dict, optional
+        Label -> :meth:`ServoLoop.margins` dict; the crossover frequency (Hz) and
+        phase margin (degree) are marked and named.
+
+    Returns
+    -------
+    Path
+        The PNG written.
+    """
+    fig, ax = figure(2, 1, figsize=(8, 7), sharex=True)
+    for k, (label, fr) in enumerate(frfs.items()):
+        c = f"C{k}"
+        mag_db = 20 * np.log10(np.abs(fr.loop))
+        phase = np.degrees(np.unwrap(np.angle(fr.loop)))
+        phase -= 360.0 * np.round(phase[0] / 360.0)  # start within +-180 degrees
+        ax[0].semilogx(fr.freq, mag_db, color=c, label=f"|L| open loop ({label})")
+        ax[0].semilogx(fr.freq, 20 * np.log10(np.abs(fr.sensitivity)), ":", color=c,
+                       lw=1, label=f"|S| = |1/(1+L)| ({label})")
+        ax[0].semilogx(fr.freq, 20 * np.log10(np.abs(fr.complementary)), "--",
+                       color=c, lw=1, label=f"|T| = |L/(1+L)| ({label})")
+        ax[1].semilogx(fr.freq, phase, color=c, label=f"phase of L ({label})")
+        m = (margins or {}).get(label) or {}
+        fc, pm = m.get("crossover_hz"), m.get("phase_margin_deg")
+        if fc is not None and np.isfinite(fc):
+            for a in ax:
+                a.axvline(fc, color=c, lw=0.7, alpha=0.6)
+            ax[1].annotate(
+                f"crossover {fc:.0f} Hz\nphase margin {pm:.1f} deg",
+                (fc, -180.0 + (pm if np.isfinite(pm) else 0.0)),
+                xytext=(8, -30 - 28 * k), textcoords="offset points", fontsize=7,
+                color=c,
+                arrowprops={"arrowstyle": "-", "color": c, "lw": 0.5},
+            )
+    ax[0].axhline(0.0, color="0.5", lw=0.5)
+    ax[1].axhline(-180.0, color="0.5", lw=0.5)
+    ax[0].set_ylabel("magnitude [dB]")
+    ax[0].set_ylim(bottom=max(ax[0].get_ylim()[0], -80.0))
+    ax[0].legend(fontsize=6, ncol=2)
+    ax[0].grid(True, which="both", alpha=0.3)
+    ax[1].set_ylabel("phase of L [deg]")
+    ax[1].set_xlabel("frequency [Hz]")
+    ax[1].grid(True, which="both", alpha=0.3)
+    ax[0].set_title("Servo loop: open-loop gain L (controller x amplifier x mechanics "
+                    "x sensor),\nsensitivity S and complementary sensitivity T",
+                    fontsize=10)
+    return save(fig, path)
+
+
+def plot_tool_frfs(frfs: dict, path: str | Path) -> Path:
+    """Closed-loop FRFs from every input to the tool position, per mass.
+
+    ``frfs`` maps a label (e.g. "0.175 kg") to a :class:`~servosurf.servo.LoopFRF`;
+    magnitudes in SI units per input unit (m/m, m/A, m/N), phases in degrees.
     """
     fig, ax = figure(2, 1, figsize=(8, 7), sharex=True)
     paths = [
@@ -59,7 +119,8 @@ def plot_loop_bode(frfs: dict, path: str | Path) -> Path:
     ax[1].set_ylabel("phase [deg]")
     ax[1].set_xlabel("frequency [Hz]")
     ax[1].grid(True, which="both", alpha=0.3)
-    ax[0].set_title("Closed-loop FRFs from each disturbance to the tool (cf. Fig. 9a)")
+    ax[0].set_title("Closed loop: FRFs from the reference and each disturbance to "
+                    "the tool position", fontsize=10)
     return save(fig, path)
 
 

@@ -66,7 +66,8 @@ def _unit(unit: str) -> float:
 
 
 def _draw_map(
-    fig: Any, ax: Any, surface: Surface, unit: str, title: str | None
+    fig: Any, ax: Any, surface: Surface, unit: str, title: str | None,
+    robust: float | None = None,
 ) -> None:
     scale = _unit(unit)
     ny, nx = surface.shape
@@ -87,20 +88,38 @@ def _draw_map(
     # true aspect unless the map is a thin strip, which would vanish
     aspect = "equal" if 0.1 <= height / width <= 10.0 else "auto"
     data = np.ma.masked_invalid(surface.z / scale)
+    vmin = vmax = None
+    extend = "neither"
+    label = f"height ({_UNIT_LABEL[unit]})"
+    if robust is not None and data.count() > 1:
+        vmin, vmax = np.percentile(data.compressed(), [robust, 100.0 - robust])
+        if not vmax > vmin:
+            vmin = vmax = None
+        else:
+            below = bool((data < vmin).any())
+            above = bool((data > vmax).any())
+            extend = {(True, True): "both", (True, False): "min",
+                      (False, True): "max"}.get((below, above), "neither")
+            label += f", colours {robust:g}-{100 - robust:g} percentile"
     im = ax.imshow(
         data,
         extent=extent,
         origin="upper",
         aspect=aspect,
         cmap="viridis",
-        interpolation="nearest",
+        # a map with more pixels than the PNG is low-pass filtered before it is
+        # resampled (no moire of the display's own decimation); smaller: nearest
+        interpolation="antialiased",
+        vmin=vmin,
+        vmax=vmax,
     )
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     if title:
         ax.set_title(title)
-    cb = fig.colorbar(im, ax=ax)
-    cb.set_label(f"height ({_UNIT_LABEL[unit]})")
+    cb = fig.colorbar(im, ax=ax, extend=extend)
+    cb.formatter.set_useOffset(False)  # read heights directly, no "-4.999e3" offset
+    cb.set_label(label)
 
 
 def plot_map(
@@ -110,6 +129,7 @@ def plot_map(
     title: str | None = None,
     unit: str = "nm",
     dpi: int = 120,
+    robust: float | None = None,
 ) -> Path:
     """Write a height map image with a colour bar to a PNG file.
 
@@ -125,6 +145,11 @@ def plot_map(
         Height unit of the colour bar.
     dpi : int, default: 120
         Resolution of the PNG, in dots per inch.
+    robust : float or None, default: None
+        Percentile p (0 <= p < 50): the colour scale spans the p-th to the
+        (100 - p)-th percentile of the valid heights, so that a few outliers (a
+        filter's rim artefact) do not set it; heights beyond are drawn in the end
+        colours and the colour bar shows arrows. None: the full range.
 
     Returns
     -------
@@ -134,16 +159,18 @@ def plot_map(
     Raises
     ------
     ConfigError
-        If ``unit`` is unknown.
+        If ``unit`` is unknown or ``robust`` is outside [0, 50).
 
     Notes
     -----
     Axes are in um when the map is calibrated, in pixels otherwise.
     """
     _unit(unit)
+    if robust is not None and not (0.0 <= float(robust) < 50.0):
+        raise ConfigError(f"robust must be a percentile in [0, 50), got {robust!r}")
     fig = _new_figure((6.0, 4.8))
     ax = fig.add_subplot()
-    _draw_map(fig, ax, surface, unit, title)
+    _draw_map(fig, ax, surface, unit, title, robust)
     return _save_atomic(fig, path, dpi)
 
 
@@ -213,6 +240,9 @@ def plot_profile_with_form_error(
     *,
     title: str | None = None,
     dpi: int = 120,
+    xlabel: str = "x (\u00b5m)",
+    label: str = "measured",
+    nominal_label: str = "nominal",
 ) -> Path:
     """Write a two-panel PNG: profile with its nominal, and the form error.
 
@@ -232,6 +262,12 @@ def plot_profile_with_form_error(
         Figure title.
     dpi : int, default: 120
         Resolution of the PNG, in dots per inch.
+    xlabel : str, default: "x (µm)"
+        Label of the position axis (name the axis the profile runs along).
+    label : str, default: "measured"
+        Legend entry of ``z`` (e.g. "simulated").
+    nominal_label : str, default: "nominal"
+        Legend entry of ``z_nominal``.
 
     Returns
     -------
@@ -252,10 +288,10 @@ def plot_profile_with_form_error(
     x, z, zn, e = arrays
     fig = _new_figure((7.0, 5.6))
     ax1, ax2 = fig.subplots(2, 1, sharex=True)
-    ax1.plot(x * 1e6, z * 1e6, lw=1.0, label="measured")
-    ax1.plot(x * 1e6, zn * 1e6, lw=1.0, ls="--", label="nominal")
+    ax1.plot(x * 1e6, z * 1e6, lw=1.0, label=label)
+    ax1.plot(x * 1e6, zn * 1e6, lw=1.0, ls="--", label=nominal_label)
     ax1.set_ylabel("height (\u00b5m)")
-    ax1.legend(loc="best")
+    ax1.legend(loc="lower left", fontsize=8)
     ax2.plot(x * 1e6, e * 1e9, lw=1.0, color="C3")
     ax2.axhline(0.0, color="0.5", lw=0.5)
     if np.isfinite(e).any():
@@ -267,7 +303,7 @@ def plot_profile_with_form_error(
             textcoords="offset points",
             xytext=(5, 5),
         )
-    ax2.set_xlabel("x (\u00b5m)")
+    ax2.set_xlabel(xlabel)
     ax2.set_ylabel("form error (nm)")
     if title:
         fig.suptitle(title)
@@ -283,8 +319,9 @@ def plot_spectrum(
     speed: float | None = None,
     title: str | None = None,
     dpi: int = 120,
+    fmin: float | None = None,
 ) -> Path:
-    """Write a log-PSD plot against spatial frequency with labelled peaks.
+    """Write a log-PSD plot against spatial frequency with every peak labelled.
 
     Parameters
     ----------
@@ -294,7 +331,8 @@ def plot_spectrum(
         One-sided PSD, in m^3 (shown in nm^2 mm).
     peaks : sequence of dict
         Peaks from :func:`servosurf.metrology.find_peaks_spectrum` (uses
-        ``freq_per_m`` and ``psd_m3``); may be empty.
+        ``freq_per_m`` and ``psd_m3``); may be empty. Every one is marked and
+        labelled; labels of neighbouring peaks are staggered so they do not overlap.
     path : str or path-like
         Destination PNG file.
     speed : float or None, default: None
@@ -304,6 +342,9 @@ def plot_spectrum(
         Figure title.
     dpi : int, default: 120
         Resolution of the PNG, in dots per inch.
+    fmin : float or None, default: None
+        Spatial frequency in 1/m below which the map was high-pass filtered (the
+        band is shaded and named); peaks below it are drawn in grey.
 
     Returns
     -------
@@ -327,23 +368,100 @@ def plot_spectrum(
     fig = _new_figure((7.0, 4.4))
     ax = fig.add_subplot()
     ax.semilogy(f[keep] * 1e-3, p[keep] * 1e21, lw=1.0)
-    for pk in peaks:
+    if fmin is not None and keep.any():
+        ax.axvspan(0.0, fmin * 1e-3, color="0.9", zorder=0)
+        band = f"high-passed\n< {fmin * 1e-3:g} mm\u207b\u00b9"
+        ax.text(0.5 * fmin * 1e-3, 0.02, band, transform=ax.get_xaxis_transform(),
+                ha="center", va="bottom", fontsize=7, color="0.4")
+    notes = []
+    for pk in sorted(peaks, key=lambda q: float(q["freq_per_m"])):
         fm = float(pk["freq_per_m"])
         pm = float(pk.get("psd_m3", np.interp(fm, f, p)))
         label = f"{fm * 1e-3:.0f} mm\u207b\u00b9"
         if speed is not None:
             label += f"\n{fm * speed * 1e-3:.2f} kHz"
-        ax.plot([fm * 1e-3], [pm * 1e21], "v", color="C3", ms=5)
-        ax.annotate(
-            label,
-            (fm * 1e-3, pm * 1e21),
-            textcoords="offset points",
-            xytext=(0, 8),
-            ha="center",
-            fontsize=8,
-        )
-    ax.set_xlabel("spatial frequency (mm\u207b\u00b9)")
-    ax.set_ylabel("PSD (nm\u00b2 mm)")
+        below = fmin is not None and fm < fmin
+        ax.plot([fm * 1e-3], [pm * 1e21], "v", color="0.45" if below else "C3", ms=5)
+        notes.append(ax.annotate(
+            label, (fm * 1e-3, pm * 1e21), textcoords="offset points",
+            xytext=(0, 8), ha="center", va="bottom", fontsize=8,
+            color="0.45" if below else "black",
+            arrowprops={"arrowstyle": "-", "color": "0.6", "lw": 0.5,
+                        "shrinkA": 0, "shrinkB": 4},
+        ))
     if title:
         ax.set_title(title)
+    ax.set_xlabel("spatial frequency (mm\u207b\u00b9)")
+    ax.set_ylabel("PSD (nm\u00b2 mm)")
+    if notes:
+        _place_labels(fig, ax, notes)
     return _save_atomic(fig, path, dpi)
+
+
+def _place_labels(fig: Any, ax: Any, notes: list) -> None:
+    """Lay out peak labels so that none overlaps another and all stay in the axes.
+
+    Each label starts 8 points above its peak. Labels whose boxes would overlap
+    side by side form a group: the group's labels sit side by side at one height,
+    above the highest of their peaks, spread just enough not to touch and centred
+    on their peaks; a thin line joins each label to its peak, and since labels
+    keep the peaks' order and sit above them, the lines cross no label. When the
+    highest label ends above the axes, the log y range grows and the layout is
+    done again (at most four times).
+    """
+    from matplotlib.text import Text
+
+    scale = 72.0 / fig.dpi  # display pixels -> points
+    for _ in range(4):
+        for a in notes:
+            a.xyann = (0, 8)
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        items = []  # [peak x, peak y, width, height, bottom at rest]
+        for a in notes:
+            bb = Text.get_window_extent(a, r)
+            px, py = ax.transData.transform(a.xy)
+            items.append([px, py, bb.width, bb.height, bb.y0])
+        groups = [[k] for k in range(len(items))]
+        merged = True
+        while merged:  # merge groups whose boxes touch until none do
+            merged = False
+            boxes = [_group_box(items, g) for g in groups]
+            for a in range(len(groups)):
+                for b in range(a + 1, len(groups)):
+                    (l1, r1, b1, t1), (l2, r2, b2, t2) = boxes[a], boxes[b]
+                    if l1 < r2 + 2 and l2 < r1 + 2 and b1 < t2 + 2 and b2 < t1 + 2:
+                        groups[a] = sorted(groups[a] + groups.pop(b))
+                        merged = True
+                        break
+                if merged:
+                    break
+        top = -np.inf
+        for g in groups:
+            left, _, bottom, _ = _group_box(items, g)
+            x = left
+            for k in g:
+                px, py, w, h, rest = items[k]
+                cx = x + w / 2 if len(g) > 1 else px
+                x += w + 4.0
+                notes[k].xyann = ((cx - px) * scale, 8 + (bottom - rest) * scale)
+                top = max(top, bottom + h)
+        box = ax.get_window_extent(r)
+        if top <= box.y1 - 2:
+            return
+        lo, hi = ax.get_ylim()
+        need = (top - box.y0 + 6) / max(box.height, 1.0)  # axes heights
+        ax.set_ylim(lo, lo * (hi / lo) ** need)
+
+
+def _group_box(items: list, group: list) -> tuple[float, float, float, float]:
+    """Display box (left, right, bottom, top) of a label group laid side by side,
+    centred on its peaks, above the highest of them."""
+    if len(group) == 1:
+        px, _, w, h, rest = items[group[0]]
+        return px - w / 2, px + w / 2, rest, rest + h
+    total = sum(items[k][2] for k in group) + 4.0 * (len(group) - 1)
+    centre = float(np.mean([items[k][0] for k in group]))
+    bottom = max(items[k][4] for k in group)
+    height = max(items[k][3] for k in group)
+    return centre - total / 2, centre + total / 2, bottom, bottom + height
