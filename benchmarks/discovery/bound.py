@@ -60,28 +60,25 @@ def oracle(args) -> dict:
     import cases as C
     import numpy as np
 
+    from servosurf.diagnose import Model, build_case, get_effect, load_manifest
     from servosurf.diagnose._blocks import Context
-    from servosurf.diagnose._diagnose import _make_blocks, build_case
-    from servosurf.diagnose._manifest import load_manifest
-    from servosurf.diagnose._sim import ModelParams
+    from servosurf.diagnose._diagnose import _make_blocks
 
     spec = {k: entry[k] for k in ("effects", "ool", "enr", "seed")}
     p_true, _ool, _truth, _enr = C.build(spec, C.CAMPAIGNS[entry["campaign"]])
     man = load_manifest(Path(root) / "cases" / entry["case"] / "manifest.toml")
     ctx = Context(build_case(man))
-    p0 = ModelParams()
+    p0 = Model()
     by_rec: dict[str, float] = {}
     for b in _make_blocks(man, ctx, p0):
         d = b.residual(p0) - b.residual(p_true)
         by_rec[b.recording] = by_rec.get(b.recording, 0.0) + float(np.sum(d * d))
-    from servosurf.diagnose._catalogue import CATALOGUE
-
-    eff = next(e for e in CATALOGUE if e.name == entry["effects"][0])
+    eff = get_effect(entry["effects"][0])
     return {
         "case": entry["case"],
         "effect": entry["effects"][0],
         "enr": entry["enr"],
-        "q": len(eff.params),
+        "q": eff.n_params(),
         "snr": math.sqrt(sum(by_rec.values())),
         "by_recording": by_rec,
     }

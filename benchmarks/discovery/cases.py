@@ -19,8 +19,9 @@ cutting the 5 um lenslets of ``toolpaths/lenslet_5um.toml``):
 
 Noise: the machine's stochastic disturbances (sensor, current, base) realised per
 record through the true loop (generator's own synthesis), 2 mN force-sensor noise,
-0.1 nm white interferometer noise. Effects are injected with the diagnosis
-simulator's knobs where the physics is the same; the surface map is swept with the
+0.1 nm white interferometer noise. Effects are injected as terms of the diagnosis's
+model (:class:`servosurf.diagnose.Model`, the catalogue's parameter classes) where
+the physics is the same; the surface map is swept with the
 project's kernel (:func:`servosurf.toolpath.sweep`, waviness through
 :class:`~servosurf.toolpath.Tool`), and the out-of-catalogue nonlinearities run in
 the simulator's one loop kernel (:class:`servosurf.servo.Nonlinearity`). Effect
@@ -38,7 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from servosurf.cutting import ChipModel
-from servosurf.diagnose._sim import CaseModel, ModelParams
+from servosurf.diagnose import CaseModel, Model
+from servosurf.diagnose import effects as E
 from servosurf.servo import Nonlinearity, load_machine, write_frf_csv
 from servosurf.toolpath import Tool, load_toolpath, sample, sweep
 
@@ -149,7 +151,7 @@ def ool_nonlinearity(ool: dict) -> Nonlinearity:
 
 def ool_simulate(case: CaseModel, ool: dict, ref: np.ndarray, chip: bool) -> dict:
     """Deterministic loop run with an out-of-catalogue nonlinearity."""
-    p = ModelParams()
+    p = Model()
     out = case.loop.simulate(
         reference=np.ascontiguousarray(ref, dtype=float),
         chip=ChipModel(case.kt(p), case.tool_radius(), 0.0) if chip else None,
@@ -159,7 +161,19 @@ def ool_simulate(case: CaseModel, ool: dict, ref: np.ndarray, chip: bool) -> dic
 
 
 # ------------------------------------------------------------------ noise
-def _source_psds(case: CaseModel, p: ModelParams, f: np.ndarray, ool: dict | None):
+def _one(p: Model, name: str):
+    """The (first) term of effect ``name`` in ``p``, or None."""
+    ps = p.get(name)
+    return ps[0] if ps else None
+
+
+def _lines(p: Model) -> tuple[list[float], list[float]]:
+    """Frequencies (Hz) and amplitudes (m) of the base lines of ``p``."""
+    ps = p.get("base-vibration-lines")
+    return [q.frequency for q in ps], [q.amplitude for q in ps]
+
+
+def _source_psds(case: CaseModel, p: Model, f: np.ndarray, ool: dict | None):
     w = case.disturbance_psds(p, f)
     if ool and ool["kind"] == "sensor-1/f-noise":
         w["sensor_noise"] = w["sensor_noise"] + ool["par"][0] ** 2 * 1000.0 / f
@@ -172,7 +186,7 @@ def _source_psds(case: CaseModel, p: ModelParams, f: np.ndarray, ool: dict | Non
 
 def noise_records(
     case: CaseModel,
-    p: ModelParams,
+    p: Model,
     n: int,
     rng,
     *,
@@ -210,15 +224,16 @@ def noise_records(
                 spec[o][band] += ps[(inp[name], o)] * x
         for o in outputs:
             out[o][c] = np.fft.irfft(spec[o], n)
-        if len(p.line_frequencies):
-            f0 = np.asarray(p.line_frequencies)
+        lf, la = _lines(p)
+        if len(lf):
+            f0 = np.asarray(lf)
             h = case.paths(p, f0)
             for j in range(f0.size):
                 ph = rng.uniform(0, 2 * np.pi)
                 for o in outputs:
                     hh = h[("base", o)][j]
                     out[o][c] += (
-                        p.line_amplitudes[j]
+                        la[j]
                         * abs(hh)
                         * np.cos(2 * np.pi * f0[j] * t + ph + np.angle(hh))
                     )
@@ -226,7 +241,7 @@ def noise_records(
 
 
 def fe_noise_rms(
-    case: CaseModel, p: ModelParams, n: int = 4096, ool=None, output: str = "fe"
+    case: CaseModel, p: Model, n: int = 4096, ool=None, output: str = "fe"
 ) -> float:
     """RMS (m) of the stochastic part of ``output`` (no lines)."""
     fs = case.fs
@@ -251,38 +266,45 @@ def surface_field(campaign: dict):
     return dataclasses.replace(spec.field, nx=nx, ny=ny)
 
 
-def path_terms(p: ModelParams, t, theta, z):
+def path_terms(p: Model, t, theta, z):
     """Outside-the-loop tool terms (generator's own formulas)."""
-    dz = -(p.sensor_a2 * z**2 + p.sensor_a3 * z**3)
-    if p.drift_amplitude:
-        dz = dz + p.drift_amplitude * (1 - np.exp(-t / p.drift_time_constant))
-    dz = dz + p.drift_rate * t
-    for h, a, ph in zip(
-        p.spindle_orders, p.spindle_amplitudes, p.spindle_phases, strict=True
-    ):
-        dz = dz + a * np.cos(h * theta + ph)
+    sn = _one(p, "sensor-nonlinearity")
+    a2, a3 = (sn.a2, sn.a3) if sn is not None else (0.0, 0.0)
+    dr = _one(p, "thermal-drift")
+    amp, tau, rate = ((dr.amplitude, dr.time_constant, dr.rate) if dr is not None
+                      else (0.0, 1.0, 0.0))
+    dz = -(a2 * z**2 + a3 * z**3)
+    if amp:
+        dz = dz + amp * (1 - np.exp(-t / tau))
+    dz = dz + rate * t
+    for q in p.get("spindle-axial-error"):
+        dz = dz + q.amplitude * np.cos(q.order * theta + q.phase)
     return dz
 
 
-def waviness_tool(spec, p: ModelParams) -> Tool:
+def waviness_tool(spec, p: Model) -> Tool:
     """The toolpath's tool with the radius error and the waviness of ``p``."""
-    from servosurf.diagnose._surface import phi_reference
+    from servosurf.diagnose.effects._tool_edge_waviness import phi_reference
 
     tool = spec.tool
-    kw = {"nose_radius": tool.nose_radius + p.radius_error}
-    if len(p.waviness) and any(p.waviness):
+    re_ = _one(p, "tool-radius-error")
+    kw = {"nose_radius": tool.nose_radius
+          + (re_.radius_error if re_ is not None else 0.0)}
+    wv = _one(p, "tool-edge-waviness")
+    waviness = wv.coefficients if wv is not None else ()
+    if len(waviness) and any(waviness):
         phi = np.linspace(-tool.arc_half_angle, tool.arc_half_angle, 4001)
         ref = phi_reference(base_case())
         u = np.clip(phi / ref, -1.5, 1.5)
-        c = np.zeros(3 + len(p.waviness))
-        c[3:] = p.waviness
+        c = np.zeros(3 + len(waviness))
+        c[3:] = waviness
         dev = np.polynomial.legendre.legval(u, c)
         kw["waviness_angle"] = tuple(phi)
         kw["waviness_deviation"] = tuple(dev)
     return dataclasses.replace(tool, **kw)
 
 
-def tool_series(case: CaseModel, p: ModelParams, ool, t_max: float) -> tuple:
+def tool_series(case: CaseModel, p: Model, ool, t_max: float) -> tuple:
     """Deterministic tool height over [0, t_max] (steady state repeated)."""
     from servosurf.diagnose._surface import ToolTrajectory
 
@@ -302,7 +324,7 @@ def tool_series(case: CaseModel, p: ModelParams, ool, t_max: float) -> tuple:
 
 
 # ------------------------------------------------------------------ recordings
-def deterministic(case: CaseModel, p: ModelParams, ool, campaign: dict) -> dict:
+def deterministic(case: CaseModel, p: Model, ool, campaign: dict) -> dict:
     """Noise-free recordings of a case (used for the data and for the ENR)."""
     fs = case.fs
     spec = case.toolpath
@@ -353,7 +375,7 @@ def speed_b_command(t, spec, f_b: float):
     return (a - path.depth_of_cut) - a * np.sin(2 * np.pi * f_b * t)
 
 
-def sweep_surface(case: CaseModel, p: ModelParams, traj, field, noise_fn=None):
+def sweep_surface(case: CaseModel, p: Model, traj, field, noise_fn=None):
     """Map by the project's sweep kernel (generator path), heights in m."""
     spec = case.toolpath
     tool = waviness_tool(spec, p)
@@ -364,8 +386,9 @@ def sweep_surface(case: CaseModel, p: ModelParams, traj, field, noise_fn=None):
     path = path.with_z(z)
     surf = sweep(path, tool, field, check=False)
     zz = surf.z.copy()
-    if p.recovery:
-        zz = zz + p.recovery * (0.0 - zz)
+    rc = _one(p, "elastic-recovery")
+    if rc is not None and rc.recovery:
+        zz = zz + rc.recovery * (0.0 - zz)
     return zz
 
 
@@ -379,7 +402,7 @@ def ring_points(case: CaseModel, k: int, dx: float):
     return r * np.cos(th), r * np.sin(th), r
 
 
-def profile_heights(case: CaseModel, p: ModelParams, traj, x, y, noise_fn=None):
+def profile_heights(case: CaseModel, p: Model, traj, x, y, noise_fn=None):
     """Heights along a profile with the pointwise model (generator path)."""
     from servosurf.diagnose._surface import PointSet, surface_heights
 
@@ -427,10 +450,10 @@ def _field_windows(case, field):
     ]
 
 
-def enr(case: CaseModel, p: ModelParams, ool, campaign: dict, nominal: dict) -> float:
+def enr(case: CaseModel, p: Model, ool, campaign: dict, nominal: dict) -> float:
     """Effect-to-noise ratio: max over recordings of effect RMS / noise RMS."""
     d = deterministic(case, p, ool, campaign)
-    sig_fe = fe_noise_rms(case, ModelParams())
+    sig_fe = fe_noise_rms(case, Model())
     vals = [
         float(np.sqrt(np.mean((d["air"] - nominal["air"]) ** 2))) / sig_fe,
         float(np.sqrt(np.mean((d["air_b"] - nominal["air_b"]) ** 2))) / sig_fe
@@ -446,12 +469,13 @@ def enr(case: CaseModel, p: ModelParams, ool, campaign: dict, nominal: dict) -> 
     # idle spectrum: lines and changes of the noise power
     s1 = fe_noise_rms(case, p, ool=ool) ** 2
     s0 = sig_fe**2
-    if len(p.line_frequencies):
-        h = case.paths(p, np.asarray(p.line_frequencies))[("base", "fe")]
-        s1 += float(np.sum((np.asarray(p.line_amplitudes) * np.abs(h)) ** 2) / 2)
+    lf, la = _lines(p)
+    if len(lf):
+        h = case.paths(p, np.asarray(lf))[("base", "fe")]
+        s1 += float(np.sum((np.asarray(la) * np.abs(h)) ** 2) / 2)
     vals.append(math.sqrt(abs(s1 - s0) / s0))
     # maps and profiles: deterministic height change over the cut points
-    tool_sig = fe_noise_rms(case, ModelParams(), output="tool")
+    tool_sig = fe_noise_rms(case, Model(), output="tool")
     map_sig = math.sqrt(tool_sig**2 + INSTRUMENT_NOISE**2)
     for key in ("surface", "rings"):
         if key in nominal:
@@ -483,36 +507,39 @@ def nominal_recordings(campaign: dict) -> dict:
     key = ("nominal", tuple(sorted(campaign.items())))
     if key not in _CASE:
         case = base_case()
-        d = deterministic(case, ModelParams(), None, campaign)
-        d.update(_maps(case, ModelParams(), None, campaign, d["traj"]))
+        d = deterministic(case, Model(), None, campaign)
+        d.update(_maps(case, Model(), None, campaign, d["traj"]))
         _CASE[key] = d
     return _CASE[key]
 
 
 # ------------------------------------------------------------------ effect draws
 def draw(effect: str, rng) -> tuple:
-    """Random sub-form and off-grid parameters; returns ``(knobs(s), truth(s))``.
+    """Random sub-form and off-grid parameters; returns ``(terms(s), truth(s), s0)``.
 
-    ``knobs(s)`` gives the ModelParams keyword arguments at strength ``s`` (> 0,
-    ENR increases with s); ``truth(s)`` the parameters the diagnosis should report.
+    ``terms(s)`` gives the effect's terms (catalogue parameter instances) at
+    strength ``s`` (> 0, ENR increases with s); ``truth(s)`` the parameters the
+    diagnosis should report (its unit-suffixed report keys); ``s0`` a first
+    strength.
     """
     case = base_case()
     m = case.machine
     if effect == "structural-mode":
         f = float(np.exp(rng.uniform(np.log(2500.0), np.log(30000.0))))
         z = float(np.exp(rng.uniform(np.log(0.01), np.log(0.05))))
-        return (
-            lambda s: {"mode_frequency": f, "mode_damping": z, "mode_gain": s},
-            lambda s: {"frequency": f, "damping_ratio": z, "compliance": s},
-            1e-10,
-        )
+
+        def kn(s):
+            return (E.StructuralModeParams(f, z, s),)
+
+        return kn, lambda s: kn(s)[0].report(), 1e-10
     if effect == "loop-delay":
         sign = 1.0 if rng.uniform() < 0.75 else -1.0
-        return (
-            lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs) if sign < 0 else s},
-            lambda s: {"extra_delay": sign * min(s, 0.45 / case.fs) if sign < 0 else s},
-            0.2 / case.fs,
-        )
+
+        def kn(s):
+            return (E.LoopDelayParams(sign * min(s, 0.45 / case.fs) if sign < 0
+                                      else s),)
+
+        return kn, lambda s: kn(s)[0].report(), 0.2 / case.fs
     if effect == "base-vibration-lines":
         k = int(rng.integers(1, 4))
         if rng.uniform() < 0.5:
@@ -528,11 +555,9 @@ def draw(effect: str, rng) -> tuple:
         fr = [fr[i] for i in order]
         rel = rel[order]
         return (
-            lambda s: {
-                "line_frequencies": tuple(fr),
-                "line_amplitudes": tuple(float(s * r) for r in rel),
-            },
-            lambda s: {"frequency_1": fr[0], "amplitude_1": s},
+            lambda s: tuple(E.BaseLineParams(f, float(s * r))
+                            for f, r in zip(fr, rel, strict=True)),
+            lambda s: {"frequency_1_hz": fr[0], "amplitude_1_m": s},
             1e-9,
         )
     if effect == "thermal-drift":
@@ -541,13 +566,13 @@ def draw(effect: str, rng) -> tuple:
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
 
         def kn(s):
-            return {
-                "drift_amplitude": sg * s if form != "lin" else 0.0,
-                "drift_time_constant": tau,
-                "drift_rate": -sg * s / 4.0 if form != "exp" else 0.0,
-            }
+            return (E.ThermalDriftParams(
+                amplitude=sg * s if form != "lin" else 0.0,
+                time_constant=tau,
+                rate=-sg * s / 4.0 if form != "exp" else 0.0,
+            ),)
 
-        return kn, kn, 1e-9
+        return kn, lambda s: kn(s)[0].report(), 1e-9
     if effect == "flexure-stiffness-nonlinearity":
         form = rng.choice(["k2", "k3", "both"])
         sg = 1.0 if rng.uniform() < 0.7 else -1.0
@@ -555,105 +580,97 @@ def draw(effect: str, rng) -> tuple:
         st = 15e-6
 
         def kn(s):
-            return {
-                "flexure_k2": sg * s * k2 / st if form != "k3" else 0.0,
-                "flexure_k3": sg * s * k2 / st**2 if form != "k2" else 0.0,
-            }
+            return (E.FlexureNonlinearityParams(
+                k_quadratic=sg * s * k2 / st if form != "k3" else 0.0,
+                k_cubic=sg * s * k2 / st**2 if form != "k2" else 0.0,
+            ),)
 
-        return (
-            kn,
-            lambda s: {
-                "k_quadratic": kn(s)["flexure_k2"],
-                "k_cubic": kn(s)["flexure_k3"],
-            },
-            1e-3,
-        )
+        return kn, lambda s: kn(s)[0].report(), 1e-3
     if effect == "force-constant-position":
         form = rng.choice(["b1", "b2", "both"])
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
         st = 15e-6
 
         def kn(s):
-            return {
-                "kf_b1": sg * s / st if form != "b2" else 0.0,
-                "kf_b2": -s / st**2 if form != "b1" else 0.0,
-            }
+            return (E.ForceConstantPositionParams(
+                b1=sg * s / st if form != "b2" else 0.0,
+                b2=-s / st**2 if form != "b1" else 0.0,
+            ),)
 
-        return (kn, lambda s: {"b1": kn(s)["kf_b1"], "b2": kn(s)["kf_b2"]}, 1e-3)
+        return kn, lambda s: kn(s)[0].report(), 1e-3
     if effect == "amplifier-saturation":
         peak = steady_peak_current(case)
 
         def kn(s):
-            return {"max_current": peak * (1.0 - min(s, 0.95))}
+            return (E.AmplifierSaturationParams(peak * (1.0 - min(s, 0.95))),)
 
-        return kn, lambda s: {"max_current": kn(s)["max_current"]}, 0.02
+        return kn, lambda s: kn(s)[0].report(), 0.02
     if effect == "sensor-nonlinearity":
         form = rng.choice(["a2", "a3", "both"])
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
         st = 10e-6
 
         def kn(s):
-            return {
-                "sensor_a2": sg * s / st if form != "a3" else 0.0,
-                "sensor_a3": s / st**2 if form != "a2" else 0.0,
-            }
+            return (E.SensorNonlinearityParams(
+                a2=sg * s / st if form != "a3" else 0.0,
+                a3=s / st**2 if form != "a2" else 0.0,
+            ),)
 
-        return kn, lambda s: {"a2": kn(s)["sensor_a2"], "a3": kn(s)["sensor_a3"]}, 1e-3
+        return kn, lambda s: kn(s)[0].report(), 1e-3
     if effect == "sensor-noise-shape":
         sn = m.disturbances.sensor_noise
         form = rng.choice(["floor", "corner"])
 
         def kn(s):
             if form == "floor":
-                return {"sensor_floor": sn.floor * (1.0 + s)}
-            return {"sensor_corner": sn.corner * (1.0 + s)}
+                return (E.SensorNoiseShapeParams(sn.floor * (1.0 + s), sn.corner),)
+            return (E.SensorNoiseShapeParams(sn.floor, sn.corner * (1.0 + s)),)
 
+        key = E.SensorNoiseShapeParams.report_key(form)
         return (
             kn,
-            lambda s: (
-                {"floor": sn.floor * (1 + s)}
-                if form == "floor"
-                else {"corner": sn.corner * (1 + s)}
-            ),
+            lambda s: {key: getattr(kn(s)[0], form)},
             0.1,
         )
     if effect == "tool-edge-waviness":
+        from servosurf.diagnose.effects._tool_edge_waviness import phi_reference
+
         v = rng.normal(size=4)
         v /= np.linalg.norm(v)
+        ref = phi_reference(case)
 
         def kn(s):
-            return {"waviness": tuple(float(s * c) for c in v)}
+            return (E.ToolEdgeWavinessParams(ref, *(float(s * c) for c in v)),)
 
-        return kn, lambda s: {f"p{k + 3}": float(s * v[k]) for k in range(4)}, 1e-9
+        return kn, lambda s: kn(s)[0].report(), 1e-9
     if effect == "tool-radius-error":
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
-        return (
-            lambda s: {"radius_error": sg * s},
-            lambda s: {"radius_error": sg * s},
-            1e-6,
-        )
+
+        def kn(s):
+            return (E.ToolRadiusErrorParams(sg * s),)
+
+        return kn, lambda s: kn(s)[0].report(), 1e-6
     if effect == "cutting-force-coefficient":
         sg = 1.0 if rng.uniform() < 0.5 else -1.0
         k0 = case.specific_force
-        return (
-            lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))},
-            lambda s: {"specific_force": k0 * (1 + sg * min(s, 0.8))},
-            0.01,
-        )
+
+        def kn(s):
+            return (E.CuttingForceCoefficientParams(k0 * (1 + sg * min(s, 0.8))),)
+
+        return kn, lambda s: kn(s)[0].report(), 0.01
     if effect == "spindle-axial-error":
         h = int(rng.integers(1, 13))
         ph = float(rng.uniform(-np.pi, np.pi))
         return (
-            lambda s: {
-                "spindle_orders": (h,),
-                "spindle_amplitudes": (s,),
-                "spindle_phases": (ph,),
-            },
-            lambda s: {"order_1": float(h), "amplitude_1": s},
+            lambda s: (E.SpindleAxialErrorParams(h, s, ph),),
+            lambda s: {"order_1": float(h), "amplitude_1_m": s},
             1e-9,
         )
     if effect == "elastic-recovery":
-        return (lambda s: {"recovery": s}, lambda s: {"recovery": s}, 1e-3)
+        def kn(s):
+            return (E.ElasticRecoveryParams(s),)
+
+        return kn, lambda s: kn(s)[0].report(), 1e-3
     raise KeyError(effect)
 
 
@@ -665,38 +682,40 @@ def steady_peak_current(case) -> float:
     """
     if "ipeak" not in _CASE:
         t = np.arange(int(0.1 * case.fs)) / case.fs
-        u = case.simulate_path(ModelParams(), t)["u"]
+        u = case.simulate_path(Model(), t)["u"]
         # the limit acts on the DAC command itself (ServoLoop's amplifier stage)
         _CASE["ipeak"] = float(np.max(np.abs(u)) * case.machine.actuator.current_gain)
     return _CASE["ipeak"]
 
 
 def draw_ool(kind: str, rng) -> tuple:
-    """Out-of-catalogue effect at strength s: ``(ool(s), knobs(s))``."""
+    """Out-of-catalogue effect at strength s: ``(ool(s), terms(s), s0)``."""
     case = base_case()
     k2 = case.machine.mechanics.k2
     if kind == "bouc-wen-hysteresis":
         az = float(rng.uniform(2e-6, 6e-6))
         return (
             lambda s: {"kind": kind, "par": [s * k2, 0.5 / az, 0.5 / az]},
-            lambda s: {},
+            lambda s: (),
             0.01,
         )
     if kind == "quadratic-damping":
-        return (lambda s: {"kind": kind, "par": [s * 100.0]}, lambda s: {}, 0.1)
+        return (lambda s: {"kind": kind, "par": [s * 100.0]}, lambda s: (), 0.1)
     if kind == "coulomb-friction":
-        return (lambda s: {"kind": kind, "par": [s, 1e-4]}, lambda s: {}, 1e-3)
+        return (lambda s: {"kind": kind, "par": [s, 1e-4]}, lambda s: (), 1e-3)
     if kind == "opposite-sign-mode":
         f = float(np.exp(rng.uniform(np.log(3000.0), np.log(20000.0))))
         z = float(rng.uniform(0.01, 0.04))
         return (
             lambda s: None,
-            lambda s: {"mode_frequency": f, "mode_damping": z, "mode_gain": -s},
+            # a mode of negative compliance (non-collocated): outside the
+            # catalogue's physical bounds, carried by its parameter class
+            lambda s: (E.StructuralModeParams(f, z, -s),),
             1e-10,
         )
     if kind == "sensor-1/f-noise":
         sn = case.machine.disturbances.sensor_noise
-        return (lambda s: {"kind": kind, "par": [s * sn.level]}, lambda s: {}, 1.0)
+        return (lambda s: {"kind": kind, "par": [s * sn.level]}, lambda s: (), 1.0)
     raise KeyError(kind)
 
 
@@ -711,7 +730,7 @@ def scale_to_enr(target: float, make, campaign: dict, s0: float) -> float:
 
     def f(s):
         p, ool = make(s)
-        if p.has_mode and not case.is_stable(p):
+        if "structural-mode" in p and not case.is_stable(p):
             return float("inf")
         return enr(case, p, ool, campaign, nom)
 
@@ -737,7 +756,7 @@ def scale_to_enr(target: float, make, campaign: dict, s0: float) -> float:
 
 
 # ------------------------------------------------------------------ writing a case
-def write_case(folder: Path, p: ModelParams, ool, campaign: dict, seed: int) -> None:
+def write_case(folder: Path, p: Model, ool, campaign: dict, seed: int) -> None:
     """Write the recordings and the manifest of one case."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -850,7 +869,7 @@ def _scaled(target, draw_fn, make_fn, campaign, what):
 
 
 def build(spec: dict, campaign: dict):
-    """Model of a case spec: ``(ModelParams, ool, truth, enr_achieved)``.
+    """Model of a case spec: ``(Model, ool, truth, enr_achieved)``.
 
     ``spec``: ``{"effects": [name, ...], "ool": name or None, "enr": float,
     "seed": int}``. Every effect is scaled to the target ENR and checked: the
@@ -863,7 +882,7 @@ def build(spec: dict, campaign: dict):
         (kn, tr, _s0), s, e = _scaled(
             spec["enr"],
             lambda name=name: draw(name, rng),
-            lambda d: (lambda s, kn=d[0]: (ModelParams(**kn(s)), None)),
+            lambda d: (lambda s, kn=d[0]: (Model.of(*kn(s)), None)),
             campaign,
             name,
         )
@@ -875,20 +894,17 @@ def build(spec: dict, campaign: dict):
         # no effect; its ENR (relative change of the idle noise power) is recorded
         par = [float(c) for c in spec["noise_scale"]]
         ool_make = {"kind": "noise-scale", "par": par}
-        achieved["noise-scale"] = enr(base_case(), ModelParams(), ool_make, campaign,
+        achieved["noise-scale"] = enr(base_case(), Model(), ool_make, campaign,
                                       nominal_recordings(campaign))
     if spec.get("ool"):
         (om, okn, _s0), s, e = _scaled(
             spec["enr"],
             lambda: draw_ool(spec["ool"], rng),
-            lambda d: (lambda s, om=d[0], okn=d[1]: (ModelParams(**okn(s)), om(s))),
+            lambda d: (lambda s, om=d[0], okn=d[1]: (Model.of(*okn(s)), om(s))),
             campaign,
             spec["ool"],
         )
         knobs.append(okn(s))
         ool_make = om(s)
         achieved[spec["ool"]] = float(e)
-    kw: dict = {}
-    for k in knobs:
-        kw.update(k)
-    return ModelParams(**kw), ool_make, truths, achieved
+    return Model.of(*(q for k in knobs for q in k)), ool_make, truths, achieved

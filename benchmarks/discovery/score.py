@@ -69,24 +69,29 @@ def _curve_err(est, tru, names, powers, lo, hi):
 
 
 def param_error(effect: str, truth: dict, est: dict, nominal: dict) -> float:
-    """Relative error of the primary parameters of one effect (see module doc)."""
+    """Relative error of the primary parameters of one effect (see module doc).
+
+    ``truth`` and ``est`` use the diagnosis's report keys (SI, unit-suffixed:
+    ``frequency_hz``, ``amplitude_1_m``, ...).
+    """
     if effect == "structural-mode":
         # frequency and resonant compliance g / (2 zeta): the peak the data see
         # (static compliance and damping trade off when the peak is narrow)
-        peak_e = est["compliance"] / (2 * est["damping_ratio"])
-        peak_t = truth["compliance"] / (2 * truth["damping_ratio"])
-        return max(_rel(est["frequency"], truth["frequency"]), _rel(peak_e, peak_t))
+        peak_e = est["compliance_m_per_n"] / (2 * est["damping_ratio"])
+        peak_t = truth["compliance_m_per_n"] / (2 * truth["damping_ratio"])
+        return max(_rel(est["frequency_hz"], truth["frequency_hz"]),
+                   _rel(peak_e, peak_t))
     if effect == "loop-delay":
-        return _rel(est["extra_delay"], truth["extra_delay"])
+        return _rel(est["extra_delay_s"], truth["extra_delay_s"])
     if effect == "base-vibration-lines":
-        f0, a0 = truth["frequency_1"], truth["amplitude_1"]
+        f0, a0 = truth["frequency_1_hz"], truth["amplitude_1_m"]
         best = None
         for k in range(1, 9):
-            f = est.get(f"frequency_{k}")
+            f = est.get(f"frequency_{k}_hz")
             if f is None:
                 continue
             if best is None or abs(f - f0) < abs(best[0] - f0):
-                best = (f, est[f"amplitude_{k}"])
+                best = (f, est[f"amplitude_{k}_m"])
         if best is None:
             return float("inf")
         return max(_rel(best[0], f0), _rel(best[1], a0))
@@ -94,40 +99,41 @@ def param_error(effect: str, truth: dict, est: dict, nominal: dict) -> float:
         t = np.linspace(0, nominal.get("drift_span", 4.5), 400)
 
         def d(p):
-            tau = max(p.get("drift_time_constant", p.get("time_constant", 1.0)), 1e-9)
-            a = p.get("drift_amplitude", p.get("amplitude", 0.0))
-            b = p.get("drift_rate", p.get("rate", 0.0))
+            tau = max(p.get("time_constant_s", 1.0), 1e-9)
+            a = p.get("amplitude_m", 0.0)
+            b = p.get("rate_m_per_s", 0.0)
             return a * (1 - np.exp(-t / tau)) + b * t
 
         dt = d(truth)
         return float(np.linalg.norm(d(est) - dt) / max(np.linalg.norm(dt), 1e-300))
     if effect == "flexure-stiffness-nonlinearity":
-        return _curve_err(est, truth, ("k_quadratic", "k_cubic"), (2, 3), -5e-6, 15e-6)
+        return _curve_err(est, truth, ("k_quadratic_n_per_m2", "k_cubic_n_per_m3"),
+                          (2, 3), -5e-6, 15e-6)
     if effect == "force-constant-position":
-        return _curve_err(est, truth, ("b1", "b2"), (1, 2), -5e-6, 15e-6)
+        return _curve_err(est, truth, ("b1_per_m", "b2_per_m2"), (1, 2), -5e-6, 15e-6)
     if effect == "sensor-nonlinearity":
-        return _curve_err(est, truth, ("a2", "a3"), (2, 3), -5e-6, 0.0)
+        return _curve_err(est, truth, ("a2_per_m", "a3_per_m2"), (2, 3), -5e-6, 0.0)
     if effect == "amplifier-saturation":
-        return _rel(est["max_current"], truth["max_current"])
+        return _rel(est["max_current_a"], truth["max_current_a"])
     if effect == "sensor-noise-shape":
-        k = "floor" if "floor" in truth else "corner"
+        k = "floor" if "floor_m_per_sqrt_hz" in truth else "corner"
+        key = "floor_m_per_sqrt_hz" if k == "floor" else "corner_hz"
         x0 = nominal["sensor_" + k]
-        return abs((est[k] - x0) - (truth[k] - x0)) / abs(truth[k] - x0)
+        return abs((est[key] - x0) - (truth[key] - x0)) / abs(truth[key] - x0)
     if effect == "tool-edge-waviness":
-        names = ("p3", "p4", "p5", "p6")
+        names = ("p3_m", "p4_m", "p5_m", "p6_m")
         return _pair_err(est, truth, names, (1.0,) * 4)
     if effect == "tool-radius-error":
-        return _rel(est["radius_error"], truth["radius_error"])
+        return _rel(est["radius_error_m"], truth["radius_error_m"])
     if effect == "cutting-force-coefficient":
         k0 = nominal["specific_force"]
-        return abs(est["specific_force"] - truth["specific_force"]) / abs(
-            truth["specific_force"] - k0
-        )
+        key = "specific_force_n_per_m2"
+        return abs(est[key] - truth[key]) / abs(truth[key] - k0)
     if effect == "spindle-axial-error":
         h = truth["order_1"]
         for k in range(1, 5):
             if est.get(f"order_{k}") == h:
-                return _rel(est[f"amplitude_{k}"], truth["amplitude_1"])
+                return _rel(est[f"amplitude_{k}_m"], truth["amplitude_1_m"])
         return float("inf")
     if effect == "elastic-recovery":
         return _rel(est["recovery"], truth["recovery"])

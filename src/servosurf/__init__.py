@@ -21,7 +21,8 @@ package only through its public ``__init__`` names, never its private modules
 4. ``servo``, ``toolpath`` (the loop; the path, the tool and the sweep);
 5. ``noise``, ``cutting`` (disturbance realisations through the loop; the chip
    force and the material rules);
-6. ``_parts``, ``run``, ``simulation``, ``scale`` (one run's configuration and
+6. ``_parts``, ``_hooks`` (the hook protocol of simulate and the diagnosis's
+   fitted terms), ``run``, ``simulation``, ``scale`` (one run's configuration and
    assembly, the whole face);
 7. ``calibration``, ``report``, ``viz``, ``diagnose`` (paper calibration,
    analyses with result objects, figures, the diagnosis);
@@ -52,7 +53,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"io"}),
     frozenset({"servo", "toolpath"}),
     frozenset({"noise", "cutting"}),
-    frozenset({"_parts", "run", "simulation", "scale"}),
+    frozenset({"_parts", "_hooks", "run", "simulation", "scale"}),
     frozenset({"calibration", "report", "viz", "diagnose"}),
     frozenset({"commands"}),
     frozenset({"cli", "__main__"}),

@@ -267,10 +267,13 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
         "fit_before_percent",
         "fit_after_percent",
         "unexplained_power_fraction",
+        "refused",
     }
     assert data["verdict"] == "explained"
     for m in data["mismatches"]:
         assert set(m) >= {"recording", "domain", "where", "significance"}
+    for r in data["refused"]:  # candidates refused as physically implausible
+        assert set(r) >= {"effect", "parameters", "reason"} and r["reason"]
     e = data["explanations"][0]
     assert set(e) >= {
         "effect",
@@ -280,7 +283,7 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
         "fit_after_percent",
     }
     fitted = load_machine(dest / "fitted-machine.toml")
-    d_true = k["truth"]["loop-delay"]["extra_delay"] * 199.6e3
+    d_true = k["truth"]["loop-delay"]["extra_delay_s"] * 199.6e3
     nominal = load_machine().controller.delay
     assert abs(fitted.controller.delay - nominal - d_true) <= 0.1 * abs(d_true)
     assert fitted.controller.kp is not None  # the installed controller is kept
@@ -324,6 +327,7 @@ def test_records_at_another_rate_are_compared_at_their_own_samples(blind):
     """Every second sample of a case's records (fs / 2): the loop still runs at
     the controller rate and its prediction at the kept samples is the full-rate
     one; idle records are compared up to the record's Nyquist frequency."""
+    from servosurf.diagnose import Model
     from servosurf.diagnose._blocks import (
         Context,
         CutBlock,
@@ -333,16 +337,16 @@ def test_records_at_another_rate_are_compared_at_their_own_samples(blind):
     )
     from servosurf.diagnose._diagnose import _make_blocks, build_case
     from servosurf.diagnose._manifest import load_manifest
-    from servosurf.diagnose._sim import ModelParams
+    from servosurf.diagnose.effects import BaseLineParams
 
     out, _results, key, _score = blind
     k = next(c for c in key["cases"] if c["effects"] == ["base-vibration-lines"])
     man = load_manifest(out / "cases" / k["case"] / "manifest.toml")
     case = build_case(man)
     ctx = Context(case)
-    p = ModelParams(line_frequencies=(1234.5,), line_amplitudes=(3e-9,))
+    p = Model.of(BaseLineParams(1234.5, 3e-9))
     kinds = set()
-    for b in _make_blocks(man, ctx, ModelParams()):
+    for b in _make_blocks(man, ctx, Model()):
         if isinstance(b, CutBlock):
             kinds.add("cut")
             d = {
@@ -395,17 +399,17 @@ def test_time_records_at_half_rate_are_whitened_at_their_own_rate(blind):
     residual's mean square is the model's aliased-to-unaliased power ratio
     mean(1 + S(fs/2 - f) / S(f)) (subsampling folds the band above the new
     Nyquist frequency), within 5 standard errors."""
+    from servosurf.diagnose import Model
     from servosurf.diagnose._blocks import Context, CutBlock, TimeBlock
     from servosurf.diagnose._diagnose import _make_blocks, build_case
     from servosurf.diagnose._manifest import load_manifest
-    from servosurf.diagnose._sim import ModelParams
 
     out, _results, key, _score = blind
     k = next(c for c in key["cases"] if c["effects"] == [] and c["ool"] is None)
     man = load_manifest(out / "cases" / k["case"] / "manifest.toml")
     case = build_case(man)
     ctx = Context(case)
-    p = ModelParams()
+    p = Model()
     checked = 0
     for b in _make_blocks(man, ctx, p):
         if not isinstance(b, TimeBlock) or isinstance(b, CutBlock):
@@ -463,7 +467,7 @@ def test_pointwise_surface_matches_the_sweep_kernel():
     """The diagnosis's pointwise surface equals servosurf.toolpath.sweep."""
     import dataclasses
 
-    from servosurf.diagnose._sim import CaseModel, ModelParams
+    from servosurf.diagnose import CaseModel, Model
     from servosurf.diagnose._surface import PointSet, surface_heights, tool_trajectory
     from servosurf.servo import load_machine
     from servosurf.toolpath import load_toolpath, sample, sweep
@@ -472,12 +476,12 @@ def test_pointwise_surface_matches_the_sweep_kernel():
     fld = dataclasses.replace(spec.field, nx=120, ny=100)
     case = CaseModel(load_machine().with_moving_mass(0.175).with_bandwidth(468.0),
                      spec)
-    traj = tool_trajectory(case, ModelParams())
+    traj = tool_trajectory(case, Model())
     path = sample(spec, field=fld)
     ref = sweep(path.with_z(traj(path.t)), spec.tool, fld)
     x, y = fld.coords()
     xx, yy = np.meshgrid(x, y)
-    z = surface_heights(case, PointSet(case, xx.ravel(), yy.ravel()), ModelParams(),
+    z = surface_heights(case, PointSet(case, xx.ravel(), yy.ravel()), Model(),
                         traj).reshape(xx.shape)
     assert (z < -1e-6).mean() > 0.2  # the field holds a good part of a lenslet
     np.testing.assert_allclose(z, ref.z, rtol=0, atol=1e-15)  # 1 fm

@@ -20,9 +20,9 @@ def _scale(par):
 
 
 def test_common_factor_scales_every_record_by_its_square_root(C):
-    from servosurf.diagnose._sim import ModelParams
+    from servosurf.diagnose import Model
 
-    case, p = C.base_case(), ModelParams()
+    case, p = C.base_case(), Model()
     nom = C.noise_records(case, p, 1024, np.random.default_rng(3), count=2)["fe"]
     big = C.noise_records(case, p, 1024, np.random.default_rng(3), count=2,
                           ool=_scale((2.0, 2.0, 2.0)))["fe"]
@@ -30,9 +30,9 @@ def test_common_factor_scales_every_record_by_its_square_root(C):
 
 
 def test_each_factor_scales_its_own_source_power(C):
-    from servosurf.diagnose._sim import ModelParams
+    from servosurf.diagnose import Model
 
-    case, p = C.base_case(), ModelParams()
+    case, p = C.base_case(), Model()
     var0 = C.fe_noise_rms(case, p) ** 2
     parts = []
     for k in range(3):  # the power each source adds, from a factor 2 on it alone

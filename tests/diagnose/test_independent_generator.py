@@ -209,7 +209,8 @@ def test_integrator_converges_with_the_cutting_force(ind, mach):
 def test_held_chip_force_reproduces_the_diagnosis_cut_model(ind, mach, tmp_path):
     # the diagnosis holds the chip force over each sample; with the same choice
     # the two loops agree, with a continuous force they differ by ~1 nm (RMS)
-    from servosurf.diagnose._sim import CaseModel, ModelParams
+    from servosurf.diagnose import Model
+    from servosurf.diagnose._sim import CaseModel
     from servosurf.servo import load_machine
     from servosurf.toolpath import load_toolpath
 
@@ -220,7 +221,7 @@ def test_held_chip_force_reproduces_the_diagnosis_cut_model(ind, mach, tmp_path)
     n = 24000
     t = np.arange(n) / m.fs
     path = ind.surface.load_lenslet(ctx.TOOLPATH)
-    ref = case.simulate_path(ModelParams(), t)["tool"]
+    ref = case.simulate_path(Model(), t)["tool"]
     late = slice(n // 2, n)
     held = ind.loop.Chip(kt=case.specific_force, radius=path.nose_radius, hold=True)
     cont = dataclasses.replace(held, hold=False)

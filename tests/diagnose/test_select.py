@@ -10,8 +10,23 @@ import math
 
 import numpy as np
 
-from servosurf.diagnose._catalogue import Config, Locations
+from servosurf.diagnose import Mismatch, Model
 from servosurf.diagnose._select import CHANNEL_RETRIES, Candidate, Engine, Term
+from servosurf.diagnose.effects import BaseLineParams, Config, Evidence
+
+
+def _ev(fs=1e4, record_length=4096.0, fts=0.0, map_line_freqs=()):
+    """Evidence with lines located on a ring profile at ``map_line_freqs`` (Hz)."""
+    mism = tuple(
+        Mismatch("ring0.npz", "profile", f"line at {f} Hz", 10.0, "line",
+                 {"frequency_hz": float(f)})
+        for f in map_line_freqs
+    )
+    return Evidence(fs=fs, record_length=record_length, fts=fts, mismatches=mism)
+
+
+def _lines_model(freqs, amps):
+    return Model.of(*(BaseLineParams(f, a) for f, a in zip(freqs, amps, strict=True)))
 
 
 class _Eff:
@@ -23,15 +38,18 @@ class _Eff:
         self.threshold = False
         self.recalibration = False
 
-    def configs(self, loc, p):
+    def configs(self, ev, p):
         return [None]
+
+    def distinct(self, cfg, previous):
+        return False
 
 
 def _engine(cands, scores):
     """Engine whose first screening returns ``cands`` and whose fit of a
     candidate labelled L scores ``scores[L]`` (-inf: refused by the channel
     logic); later screenings return nothing."""
-    eng = Engine([], Locations(fs=1e4), [c.effect for c in cands], lambda p: [])
+    eng = Engine([], _ev(), [c.effect for c in cands], lambda p: [])
     calls = {"screen": 0, "fitted": []}
 
     def screen(p, terms):
@@ -46,6 +64,7 @@ def _engine(cands, scores):
     eng._evaluate = evaluate
     eng.fit = lambda p, terms, **kw: p
     eng.prune = lambda p, terms: (p, terms)
+    eng.enforce_plausibility = lambda p, terms, progress=None: (p, terms)
     return eng, calls
 
 
@@ -112,80 +131,71 @@ def test_weak_remainder_does_not_make_a_verdict():
 
 # ------------------------------------------------------------------ base lines
 def _lines_effect():
-    from servosurf.diagnose._catalogue import BaseLines
+    from servosurf.diagnose import get_effect
 
-    return BaseLines()
+    return get_effect("base-vibration-lines")
 
 
 def test_line_idle_bar_follows_what_the_idle_records_can_see():
-    from servosurf.diagnose._sim import ModelParams
-
     eff = _lines_effect()
     fixed = eff.require[1]
-    loc = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3050.4])
-    p = ModelParams(line_frequencies=(3050.0,), line_amplitudes=(1e-7,))
+    loc = _ev(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3050.4])
+    p = _lines_model((3050.0,), (1e-7,))
     for expected in (0.0, 1.0, 9.0, 16.0, 25.0, 36.0, 400.0):
         want = min(fixed, expected - 4.0 * math.sqrt(expected))
         assert eff.channel_bar(p, 0, loc, expected) == want
     assert eff.channel_bar(p, 0, loc, 400.0) == fixed
     assert eff.channel_bar(p, 0, loc, 1.0) < 0.0
     # the lower bar needs the line to be found on a map or profile
-    far = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3052.0])
+    far = _ev(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3052.0])
     assert eff.channel_bar(p, 0, far, 1.0) == fixed
-    assert eff.channel_bar(p, 0, Locations(fs=2e5, fts=100.0), 1.0) == fixed
+    assert eff.channel_bar(p, 0, _ev(fs=2e5, fts=100.0), 1.0) == fixed
 
 
 def test_sidebands_of_an_accepted_line_keep_the_fixed_bar():
-    from servosurf.diagnose._sim import ModelParams
-
     eff = _lines_effect()
     fixed = eff.require[1]
     found = [3050.0 + k * 100.0 + 4.0 for k in (-3, -2, -1, 1, 2, 3)] + [3230.0, 3150]
-    loc = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=found)
+    loc = _ev(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=found)
     for k in (-3, -2, -1, 1, 2, 3):
-        p = ModelParams(line_frequencies=(3050.0, 3050.0 + k * 100.0 + 4.0),
-                        line_amplitudes=(1e-7, 1e-8))
+        p = _lines_model((3050.0, 3050.0 + k * 100.0 + 4.0), (1e-7, 1e-8))
         assert eff.channel_bar(p, 1, loc, 1.0) == fixed
     # 20 Hz off every sideband and harmonic: a line of its own, judged on what
     # the idle records can see
-    p = ModelParams(line_frequencies=(3050.0, 3230.0), line_amplitudes=(1e-7, 1e-8))
+    p = _lines_model((3050.0, 3230.0), (1e-7, 1e-8))
     assert eff.channel_bar(p, 1, loc, 1.0) == 1.0 - 4.0
     # harmonics of the lenslet motion (a hysteresis locked to the FTS puts lines
     # there) need the idle records too, alone or beside another line
     for f in (400.3, 998.0):
-        loc_h = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[f])
-        assert eff.channel_bar(ModelParams(line_frequencies=(f,),
-                                           line_amplitudes=(1e-9,)), 0, loc_h,
-                               1.0) == fixed
-    loc_h = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[430.0])
-    assert eff.channel_bar(ModelParams(line_frequencies=(430.0,),
-                                       line_amplitudes=(1e-9,)), 0, loc_h,
+        loc_h = _ev(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[f])
+        assert eff.channel_bar(_lines_model((f,), (1e-9,)), 0, loc_h, 1.0) == fixed
+    loc_h = _ev(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[430.0])
+    assert eff.channel_bar(_lines_model((430.0,), (1e-9,)), 0, loc_h,
                            1.0) == 1.0 - 4.0
     # without a lenslet toolpath there are no sidebands
-    loc0 = Locations(fs=2e5, record_length=4096, fts=0.0, map_line_freqs=found)
-    p = ModelParams(line_frequencies=(3050.0, 3150.0), line_amplitudes=(1e-7, 1e-8))
+    loc0 = _ev(fs=2e5, record_length=4096, fts=0.0, map_line_freqs=found)
+    p = _lines_model((3050.0, 3150.0), (1e-7, 1e-8))
     assert eff.channel_bar(p, 1, loc0, 1.0) == 1.0 - 4.0
 
 
 class _IdleBlock:
     domain = "spectrum"
-    tags = ("lines",)
+    groups = ("base_lines",)
+    time_span = 0.0
 
     def __init__(self, data, template):
         self.data, self.template, self.n = data, template, data.size
 
     def residual(self, p):
-        a = sum(p.line_amplitudes) if p.line_amplitudes else 0.0
+        a = sum(q.amplitude for q in p.get("base-vibration-lines"))
         return self.data - a * self.template
 
 
 def _channel(data, template):
-    from servosurf.diagnose._sim import ModelParams
-
     eff = _lines_effect()
-    loc = Locations(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3050.0])
+    loc = _ev(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=[3050.0])
     eng = Engine([_IdleBlock(data, template)], loc, [eff], lambda p: [])
-    q = ModelParams(line_frequencies=(3050.0,), line_amplitudes=(1.0,))
+    q = _lines_model((3050.0,), (1.0,))
     return eng._channel_ok(eff, q, Term(eff, 0))
 
 
@@ -206,36 +216,31 @@ def test_channel_logic_judges_a_line_by_its_own_idle_prediction():
 
 class _TimeRec:
     domain = "time"
-    tags = ("lines",)
+    groups = ("base_lines",)
     fs = 2e5
     n = 32768
-    records = [{"fe": np.zeros(32768)}]  # 0.164 s
+    time_span = 32768 / 2e5  # 0.164 s
 
 
 class _Profile:
     domain = "profile"
-    tags = ("lines",)
+    groups = ("base_lines",)
     n = 200
-    tpass = np.linspace(0.0, 1.49, 200)  # one revolution of a ring
+    time_span = 1.49  # one revolution of a ring
 
 
 def _scan(f_true, f_noise, located, lines=(), blind=True):
-    from servosurf.diagnose._sim import ModelParams
-
-    loc = Locations(fs=2e5, record_length=4096, fts=100.0,
-                    map_line_freqs=list(located))
+    loc = _ev(fs=2e5, record_length=4096, fts=100.0, map_line_freqs=list(located))
     eng = Engine([_TimeRec(), _Profile()], loc, [], lambda p: [])
-    p = ModelParams(line_frequencies=tuple(lines) + (f_noise,),
-                    line_amplitudes=(1e-7,) * (len(lines) + 1))
+    p = _lines_model(tuple(lines) + (f_noise,), (1e-7,) * (len(lines) + 1))
     slot = len(lines)
 
     def with_f(f):
-        t = list(p.line_frequencies)
-        t[slot] = float(f)
-        return p.replace(line_frequencies=tuple(t))
+        return p.replace_term("base-vibration-lines", slot,
+                              BaseLineParams(float(f), 1e-7))
 
     def dev(q, which):
-        f = q.line_frequencies[slot]
+        f = q.get("base-vibration-lines")[slot].frequency
         # the time records barely see the line: their minimum is noise, 30 Hz off;
         # the profile's minimum is sharp (1/T of a 1.49 s revolution) at the truth
         d = 5.0 * (1.0 - math.exp(-(((f - f_noise) / 20.0) ** 2)))
@@ -244,8 +249,8 @@ def _scan(f_true, f_noise, located, lines=(), blind=True):
         return d
 
     df = loc.fs / loc.record_length
-    return eng._scan_line(p, f_noise, df, with_f, dev, slot,
-                          list(located) if blind else [])
+    return _lines_effect().scan(eng, p, f_noise, df, with_f, dev, slot,
+                                list(located) if blind else [])
 
 
 def test_line_search_starts_from_the_maps_peaks_when_time_records_are_blind():
@@ -264,41 +269,74 @@ def test_line_search_starts_from_the_maps_peaks_when_time_records_are_blind():
 
 
 def test_idle_blindness_is_the_lines_own_idle_gain_against_the_bar():
-    from servosurf.diagnose._sim import ModelParams
-
     eff = _lines_effect()
     rng = np.random.default_rng(8)
     shape = rng.standard_normal(500)
     shape /= np.linalg.norm(shape)
-    p = ModelParams(line_frequencies=(3050.0,), line_amplitudes=(1.0,))
+    p = _lines_model((3050.0,), (1.0,))
     for gain, blind in ((1.0, True), (8.9, True), (9.1, False), (100.0, False)):
         blk = _IdleBlock(rng.standard_normal(500), math.sqrt(gain) * shape)
-        eng = Engine([blk], Locations(fs=2e5), [eff], lambda p: [])
-        assert eng._idle_blind(p, Term(eff, 0)) is blind
+        eng = Engine([blk], _ev(fs=2e5), [eff], lambda p: [])
+        assert eff.idle_blind(eng, p, Term(eff, 0)) is blind
     # no idle records: nothing can confirm the line
-    eng = Engine([_Profile()], Locations(fs=2e5), [eff], lambda p: [])
-    assert eng._idle_blind(p, Term(eff, 0)) is True
+    eng = Engine([_Profile()], _ev(fs=2e5), [eff], lambda p: [])
+    assert eff.idle_blind(eng, p, Term(eff, 0)) is True
 
 
-def test_map_starts_exclude_lines_locked_to_the_fts_motion():
-    from servosurf.diagnose._sim import ModelParams
-
+def test_map_starts_exclude_lines_locked_to_the_fts_motion(monkeypatch):
     eff = _lines_effect()
-    loc = Locations(fs=2e5, record_length=4096, fts=100.0,
-                    map_line_freqs=[149.7, 200.2, 3051.1])
+    loc = _ev(fs=2e5, record_length=4096, fts=100.0,
+              map_line_freqs=[149.7, 200.2, 3051.1])
     eng = Engine([_Profile()], loc, [eff], lambda p: [])
     seen = {}
 
-    def scan(p, f0, df, with_f, dev, slot, starts):
+    def scan(engine, p, f0, df, with_f, dev, slot, starts):
         seen["starts"] = list(starts)
         return f0
 
-    eng._scan_line = scan
+    monkeypatch.setattr(type(eff), "scan", lambda self, *a: scan(*a))
     eng.deviance = lambda q: 0.0
-    p = ModelParams(line_frequencies=(49.99, 2950.6), line_amplitudes=(1e-9, 1e-7))
-    eng.line_frequency_search(p, Term(eff, 1))
+    p = _lines_model((49.99, 2950.6), (1e-9, 1e-7))
+    eff.refine(eng, p, Term(eff, 1))
     # 149.7 = 49.99 + f_FTS (a sideband), 200.2 = 2 f_FTS (a harmonic)
     assert seen["starts"] == [3051.1]
-    eng._idle_blind = lambda p, term: False
-    eng.line_frequency_search(p, Term(eff, 1))
+    monkeypatch.setattr(type(eff), "idle_blind", lambda self, *a: False)
+    eff.refine(eng, p, Term(eff, 1))
     assert seen["starts"] == []
+
+
+# ------------------------------------------------------------------ plausibility
+def test_a_candidate_at_a_bound_is_refused_with_its_reason():
+    from servosurf.diagnose import get_effect
+
+    mode = get_effect("structural-mode")
+    eng = Engine([], _ev(fs=2e5), [mode], lambda p: [])
+    eng.fit = lambda q, terms, **kw: q
+    eng.deviance = lambda q: 100.0 if q == Model() else 10.0
+    # damping 0.5: the end of the fit's range (a resonance too wide to be one)
+    c = Candidate(mode, Config("6100 Hz, zeta 0.5", {"f": 6100.0, "z": 0.5}), 90.0,
+                  80.0, np.ones(1))
+    score, q, term, lam = eng._evaluate(c, Model(), [], 100.0)
+    assert score == -math.inf and lam == 90.0
+    ref = eng.refused["structural-mode"]
+    assert "damping_ratio" in ref.reason and ref.score > 0
+    assert ref.parameters["frequency_hz"] == 6100.0
+    ok = Candidate(mode, Config("6100 Hz, zeta 0.02", {"f": 6100.0, "z": 0.02}), 90.0,
+                   80.0, np.ones(1))
+    assert eng._evaluate(ok, Model(), [], 100.0)[0] > 0
+
+
+def test_a_term_the_refit_leaves_implausible_is_dropped():
+    from servosurf.diagnose import get_effect
+    from servosurf.diagnose.effects import LoopDelayParams, StructuralModeParams
+
+    mode, delay = get_effect("structural-mode"), get_effect("loop-delay")
+    eng = Engine([], _ev(fs=2e5), [mode, delay], lambda p: [])
+    eng.fit = lambda q, terms, **kw: q
+    eng.deviance = lambda q: 0.0
+    p = Model.of(StructuralModeParams(6100.0, 0.5, 1e-9), LoopDelayParams(1e-6))
+    terms = [Term(mode, 0, None, 50.0, 30.0), Term(delay, 0, None, 40.0, 20.0)]
+    q, kept = eng.enforce_plausibility(p, terms)
+    assert q == Model.of(LoopDelayParams(1e-6))
+    assert [t.effect.name for t in kept] == ["loop-delay"]
+    assert "damping_ratio" in eng.refused["structural-mode"].reason

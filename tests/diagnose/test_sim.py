@@ -1,4 +1,4 @@
-"""Tests of the diagnosis simulator's recalibration knobs (servosurf.diagnose._sim)."""
+"""Tests of the diagnosis simulator (servosurf.diagnose._sim) under catalogue terms."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from servosurf.diagnose._catalogue import CATALOGUE
-from servosurf.diagnose._sim import CaseModel, ModelParams
+from servosurf.diagnose import CATALOGUE, CaseModel, Model
+from servosurf.diagnose import effects as E
 from servosurf.servo import load_machine
 from servosurf.servo._ident import set_param
 
@@ -25,65 +25,65 @@ def _with_fixed_gains(m, pidf):
 
 
 def test_sensor_bandwidth_recalibration_is_the_machine_with_that_sensor():
-    """ModelParams(sensor_bandwidth=B) simulates the machine whose sensor has
+    """A recalibrated sensor bandwidth B simulates the machine whose sensor has
     bandwidth B under the installed controller: open-loop FRF and a 100 Hz
     tracking record equal those of a CaseModel built on that machine."""
     m = _nominal()
     case = CaseModel(m)
     m20 = _with_fixed_gains(set_param(m, "sensor.bandwidth", 20e3), case.pidf)
     ref = CaseModel(m20)
-    p = ModelParams(sensor_bandwidth=20e3)
+    p = Model.of(E.RecalibrationParams(sensor_bandwidth=20e3))
     f = np.geomspace(10.0, 60e3, 300)
     got = case.paths(p, f)["open_loop"]
-    want = ref.paths(ModelParams(), f)["open_loop"]
+    want = ref.paths(Model(), f)["open_loop"]
     np.testing.assert_allclose(got, want, rtol=1e-12)
     # and it is not the nominal sensor (the knob does something)
-    nom = case.paths(ModelParams(), f)["open_loop"]
+    nom = case.paths(Model(), f)["open_loop"]
     assert np.max(np.abs(got / nom - 1)) > 0.1
     t = np.arange(4000) / case.fs
     cmd = 10e-6 * np.sin(2 * np.pi * 100.0 * t)
     a = case.simulate(p, reference=cmd)["fe"]
-    b = ref.simulate(ModelParams(), reference=cmd)["fe"]
+    b = ref.simulate(Model(), reference=cmd)["fe"]
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
     # the lag of the sensor is in the following error: 15 vs 20 kHz differ by nm
-    c = case.simulate(ModelParams(), reference=cmd)["fe"]
+    c = case.simulate(Model(), reference=cmd)["fe"]
     assert np.sqrt(np.mean((a - c) ** 2)) > 1e-9
 
 
 def test_recalibration_frees_the_sensor_bandwidth_around_the_nominal():
     recal = next(e for e in CATALOGUE if e.name == "recalibration")
-    assert "sensor_bandwidth" in [d.name for d in recal.params]
-
-    class Loc:
-        nominal = {"moving_mass": 0.175, "flexure_stiffness": 2e4,
-                   "flexure_damping": 2.0, "force_constant": 8.0,
-                   "sensor_bandwidth": 15e3}
-
-    frees = {f.name: f for f in recal.free(ModelParams(), 0, Loc())}
+    assert "sensor_bandwidth" in [f.name for f in recal.params.quantities()]
+    ev = E.Evidence(fs=199.6e3, nominal=E.Nominal(
+        moving_mass=0.175, flexure_stiffness=2e4, flexure_damping=2.0,
+        force_constant=8.0, sensor_bandwidth=15e3))
+    m0 = recal.start(Model(), None, np.zeros(5), ev)  # every knob at its nominal
+    frees = {f.name: f for f in recal.free(m0, 0, ev)}
     assert frees["sensor_bandwidth"].lo == 5e3 and frees["sensor_bandwidth"].hi == 45e3
-    q = frees["sensor_bandwidth"].set(ModelParams(), 18e3)
-    assert q.sensor_bandwidth == 18e3 and recal.active(q)
-    assert recal.remove(q, 0).sensor_bandwidth is None
+    q = frees["sensor_bandwidth"].set(m0, 18e3)
+    assert recal.term(q, 0).sensor_bandwidth == 18e3 and recal.active(q)
+    assert not recal.active(recal.remove(q, 0))
 
 
 def test_elastic_recovery_is_never_negative():
     """Spring-back lifts the surface; a negative fraction is not that physics."""
     eff = next(e for e in CATALOGUE if e.name == "elastic-recovery")
-    (f,) = eff.free(ModelParams(), 0, None)
+    (f,) = eff.free(Model(), 0, E.Evidence(fs=199.6e3))
     assert f.lo == 0.0 and f.hi > 0.0
+    lo, _hi = E.ElasticRecoveryParams(0.01).bounds(E.Evidence(fs=199.6e3))["recovery"]
+    assert lo == 0.0
 
 
 # ------------------------------------------------------------ one loop model
 _CONTRACT = {
-    "nominal": (ModelParams(), None, None),
-    "mode": (ModelParams(mode_frequency=6100.0, mode_damping=0.03, mode_gain=2e-8),
-             "modes", None),
-    "delay": (ModelParams(extra_delay=1.3e-6), "delay", None),
-    "recalibration": (ModelParams(moving_mass=0.16, flexure_stiffness=2.5e4,
-                                  force_constant=7.5, sensor_bandwidth=18e3),
-                      "recal", None),
-    "nonlinear": (ModelParams(max_current=0.4, kf_b1=2e3, flexure_k3=3e13),
-                  None, "nl"),
+    "nominal": (Model(), None, None),
+    "mode": (Model.of(E.StructuralModeParams(6100.0, 0.03, 2e-8)), "modes", None),
+    "delay": (Model.of(E.LoopDelayParams(1.3e-6)), "delay", None),
+    "recalibration": (Model.of(E.RecalibrationParams(
+        moving_mass=0.16, flexure_stiffness=2.5e4, force_constant=7.5,
+        sensor_bandwidth=18e3)), "recal", None),
+    "nonlinear": (Model.of(E.AmplifierSaturationParams(0.4),
+                           E.ForceConstantPositionParams(b1=2e3),
+                           E.FlexureNonlinearityParams(k_cubic=3e13)), None, "nl"),
 }
 
 

@@ -4,19 +4,31 @@
 cuts, surface maps, profiles) with the simulator, locates where and how surely they
 differ, ranks a catalogue of left-out physics by how well each module's signature
 matches, fits the best under a BIC-like criterion, and says ``unexplained`` when no
-module accounts for the mismatch. See ``/work/shared/DISCOVERY.md`` for the design
-and :mod:`servosurf.diagnose._diagnose` for the pipeline.
+module accounts for the mismatch. See ``/work/shared/DISCOVERY.md`` for the design,
+:mod:`servosurf.diagnose._diagnose` for the pipeline and
+:mod:`servosurf.diagnose.effects` for the catalogue (one module per effect).
 """
 
-from ._catalogue import CATALOGUE, Effect, catalogue_table, get_effect
 from ._diagnose import VERDICTS, Diagnosis, build_case, diagnose
-from ._locate import Mismatch, locate
+from ._locate import Mismatch, gather, locate
 from ._manifest import KINDS, Manifest, Recording, load_manifest, read_recording
-from ._sim import CaseModel, ModelParams
+from ._sim import CaseModel
+from .effects import (
+    CATALOGUE,
+    Effect,
+    EffectParams,
+    Evidence,
+    Model,
+    catalogue_table,
+    get_effect,
+)
 
 __all__ = [
     "CATALOGUE",
     "Effect",
+    "EffectParams",
+    "Evidence",
+    "Model",
     "catalogue_table",
     "get_effect",
     "VERDICTS",
@@ -24,6 +36,7 @@ __all__ = [
     "build_case",
     "diagnose",
     "Mismatch",
+    "gather",
     "locate",
     "KINDS",
     "Manifest",
@@ -31,5 +44,4 @@ __all__ = [
     "load_manifest",
     "read_recording",
     "CaseModel",
-    "ModelParams",
 ]

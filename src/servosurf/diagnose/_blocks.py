@@ -1,6 +1,6 @@
 """Likelihood blocks: one per recording channel, each a whitened residual.
 
-Every block turns "measured minus simulated under a :class:`ModelParams`" into a
+Every block turns "measured minus simulated under a :class:`Model`" into a
 vector whose sum of squares is the block's deviance (-2 log-likelihood up to a
 data-only constant), with its nuisance parameters (gains, piston, tilt, lateral
 registration) profiled out by projection. The model-selection code only ever sees
@@ -29,7 +29,8 @@ import numpy as np
 import scipy as sp
 import scipy.sparse  # noqa: F401  (sp.sparse)
 
-from ._sim import CaseModel, ModelParams
+from ._sim import CaseModel
+from .effects._base import Model
 
 __all__ = [
     "Block",
@@ -178,7 +179,7 @@ def on_record_grid(
 
 def line_power(
     case: CaseModel,
-    p: ModelParams,
+    p: Model,
     freq: np.ndarray,
     n: int,
     fs: float,
@@ -192,10 +193,11 @@ def line_power(
     samples at ``fs`` Hz.
     """
     out = np.zeros(np.shape(freq))
-    if not len(p.line_frequencies):
+    lines = case.base_lines(p)
+    if not lines:
         return out
-    f0 = np.asarray(p.line_frequencies, dtype=float)
-    a = np.asarray(p.line_amplitudes, dtype=float)
+    f0 = np.asarray([f for f, _ in lines], dtype=float)
+    a = np.asarray([a for _, a in lines], dtype=float)
     h = case.paths(p, f0)[("base", output)]
     amp2 = (a * np.abs(h)) ** 2
     k = np.asarray(freq) * n / fs
@@ -213,7 +215,7 @@ LEAKAGE_OVERSAMPLING = 4
 
 
 def expected_periodogram(
-    case: CaseModel, p: ModelParams, freq: np.ndarray, n: int, fs: float,
+    case: CaseModel, p: Model, freq: np.ndarray, n: int, fs: float,
     output: str = "fe",
 ) -> np.ndarray:
     """Expected rectangular-window periodogram (one-sided, m^2/Hz) of the noise.
@@ -245,11 +247,12 @@ def expected_periodogram(
     return e[k]
 
 
-def _line_amplitudes(case: CaseModel, p: ModelParams, output: str) -> np.ndarray:
+def _line_amplitudes(case: CaseModel, p: Model, output: str) -> np.ndarray:
     """Amplitudes (m) of ``p``'s base lines in ``output`` (``fe`` or ``tool``)."""
-    f0 = np.asarray(p.line_frequencies, dtype=float)
+    lines = case.base_lines(p)
+    f0 = np.asarray([f for f, _ in lines], dtype=float)
     h = case.paths(p, f0)[("base", output)]
-    return np.asarray(p.line_amplitudes, dtype=float) * np.abs(h)
+    return np.asarray([a for _, a in lines], dtype=float) * np.abs(h)
 
 
 class Context:
@@ -277,7 +280,7 @@ class Context:
             self._memo.pop(next(iter(self._memo)))
         return v
 
-    def cut_sim(self, p: ModelParams, n: int, k0: int = 0) -> dict:
+    def cut_sim(self, p: Model, n: int, k0: int = 0) -> dict:
         """Cut of the case's toolpath: n samples from sample k0, at rest at k0."""
         n = int(n)
         k0 = int(k0)
@@ -286,7 +289,7 @@ class Context:
             t = (k0 + np.arange(n)) / self.case.fs
             return self.case.simulate_path(p, t)
 
-        kp = p.key(SIM_TAGS)
+        kp = p.key(SIM_GROUPS)
         for key, v in list(self._memo.items()):
             if (
                 len(key) == 4
@@ -298,7 +301,7 @@ class Context:
                 return {k: a[:n] for k, a in v.items()}
         return self.memo((kp, "cut", n, k0), run)
 
-    def trajectory(self, p: ModelParams):
+    def trajectory(self, p: Model):
         """Deterministic tool trajectory of the toolpath under ``p``."""
         from ._surface import tool_trajectory
 
@@ -317,7 +320,7 @@ class Context:
             + 2
         )
         return self.memo(
-            (p.key(SIM_TAGS), "traj"),
+            (p.key(SIM_GROUPS), "traj"),
             lambda: tool_trajectory(self.case, p, sim=self.cut_sim(p, n)),
         )
 
@@ -336,11 +339,14 @@ class Block:
         ``"profile"``.
     n : int
         Real observations (degrees of freedom of the deviance).
-    tags : tuple of str
-        Knob groups (:meth:`ModelParams.key`) the block depends on.
+    groups : tuple of str
+        Hook groups of the model (:meth:`Model.key`) the block depends on.
+    time_span : float
+        Longest coherent time span of the block's data in s (0: none).
     """
 
-    tags: tuple[str, ...] = ()
+    groups: tuple[str, ...] = ()
+    time_span: float = 0.0
 
     def __init__(self, recording: str, kind: str, domain: str, n: int) -> None:
         self.recording = recording
@@ -348,17 +354,17 @@ class Block:
         self.domain = domain
         self.n = n
 
-    def residual(self, p: ModelParams) -> np.ndarray:  # pragma: no cover - abstract
+    def residual(self, p: Model) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def deviance(self, p: ModelParams) -> float:
+    def deviance(self, p: Model) -> float:
         """Sum of squares of :meth:`residual`."""
         r = self.residual(p)
         return float(r @ r)
 
 
-#: knob groups the loop simulation of a cut depends on
-SIM_TAGS = ("linear", "nonlin", "force")
+#: hook groups the loop simulation of a cut depends on
+SIM_GROUPS = ("perturbation", "nonlinearity", "workpiece")
 
 
 class SpectralBlock(Block):
@@ -398,18 +404,18 @@ class SpectralBlock(Block):
             n=int(self.freq.size),
         )
 
-    tags = ("linear", "lines", "sensor_noise")
+    groups = ("perturbation", "base_lines", "machine")
 
-    def expected(self, p: ModelParams) -> np.ndarray:
+    def expected(self, p: Model) -> np.ndarray:
         """Expected periodogram (m^2/Hz) at the block's bins under ``p``."""
 
         def run():
             s = expected_periodogram(self.ctx.case, p, self.freq, self.nsamp, self.fs)
             return s + line_power(self.ctx.case, p, self.freq, self.nsamp, self.fs)
 
-        return self.ctx.memo((p.key(self.tags), "spec", self.recording), run)
+        return self.ctx.memo((p.key(self.groups), "spec", self.recording), run)
 
-    def residual(self, p: ModelParams) -> np.ndarray:
+    def residual(self, p: Model) -> np.ndarray:
         s = self.expected(p)
         if not np.all(np.isfinite(s)) or np.any(s <= 0):
             return np.full(self.n, _DIVERGED)
@@ -419,7 +425,7 @@ class SpectralBlock(Block):
 
 
 def _whiten_weights(
-    ctx: Context, p: ModelParams, freq: np.ndarray, n: int, fs: float
+    ctx: Context, p: Model, freq: np.ndarray, n: int, fs: float
 ):
     """Inverse sd of the real (and imaginary) part of an n-sample DFT at ``fs``
     (the noise's expected periodogram, window leakage included)."""
@@ -480,7 +486,7 @@ class TimeBlock(Block):
         name: str,
         records: list[dict],
         fs: float,
-        p_noise: ModelParams,
+        p_noise: Model,
     ) -> None:
         self.ctx = ctx
         self.fs = fs
@@ -496,9 +502,14 @@ class TimeBlock(Block):
             tot += 2 * int(keep.sum())
         super().__init__(recording=name, kind="following-error", domain="time", n=tot)
 
-    tags = ("linear", "nonlin", "lines")
+    groups = ("perturbation", "nonlinearity", "base_lines")
 
-    def predict(self, p: ModelParams, i: int) -> dict:
+    @property
+    def time_span(self) -> float:
+        """Longest record in s."""
+        return max(r["fe"].size for r in self.records) / self.fs
+
+    def predict(self, p: Model, i: int) -> dict:
         """Simulated record i under ``p`` (dict of the simulator)."""
         rec = self.records[i]
         n = rec["fe"].size
@@ -522,22 +533,23 @@ class TimeBlock(Block):
                     {"reference": ref, "force": frc},
                 )
 
-        key = (p.key(("linear", "nonlin")), "rec", self.recording, i)
+        key = (p.key(("perturbation", "nonlinearity")), "rec", self.recording, i)
         return self.ctx.memo(key, run)
 
-    def residual_time(self, p: ModelParams, i: int) -> np.ndarray:
+    def residual_time(self, p: Model, i: int) -> np.ndarray:
         """Unwhitened residual of record i in m."""
         return self.records[i]["fe"] - self.predict(p, i)["fe"]
 
-    def whitened(self, p: ModelParams, i: int) -> np.ndarray:
+    def whitened(self, p: Model, i: int) -> np.ndarray:
         """Whitened residual spectrum of record i (complex, lines projected out)."""
         keep, w, _ = self.meta[i]
         x = np.fft.rfft(self.residual_time(p, i))[keep] * w
-        if len(p.line_frequencies):
+        lines = self.ctx.case.base_lines(p)
+        if lines:
             n = self.records[i]["fe"].size
             t = self.records[i].get("t0", 0.0) + np.arange(n) / self.fs
             cols = []
-            for f0 in p.line_frequencies:
+            for f0, _ in lines:
                 pair = []
                 for fn in (np.cos, np.sin):
                     c = np.fft.rfft(fn(2 * np.pi * f0 * t))[keep] * w
@@ -552,7 +564,7 @@ class TimeBlock(Block):
             x = v[:m] + 1j * v[m:]
         return x
 
-    def residual(self, p: ModelParams) -> np.ndarray:
+    def residual(self, p: Model) -> np.ndarray:
         out = []
         for i in range(len(self.meta)):
             x = self.whitened(p, i)
@@ -560,7 +572,7 @@ class TimeBlock(Block):
             out.append(x.imag)
         return _finite(np.concatenate(out))
 
-    def whitened_time(self, p: ModelParams, i: int) -> np.ndarray:
+    def whitened_time(self, p: Model, i: int) -> np.ndarray:
         """Whitened residual of record i as a time series (~ N(0, 1) samples)."""
         keep, w, _ = self.meta[i]
         n = self.records[i]["fe"].size
@@ -572,10 +584,10 @@ class TimeBlock(Block):
 class CutBlock(TimeBlock):
     """A cut: following error (GLS as :class:`TimeBlock`) of the toolpath cut."""
 
-    tags = SIM_TAGS + ("lines",)
+    groups = SIM_GROUPS + ("base_lines",)
 
     def __init__(
-        self, ctx: Context, name: str, data: dict, p_noise: ModelParams
+        self, ctx: Context, name: str, data: dict, p_noise: Model
     ) -> None:
         """Build from a cut recording (``fs``, ``t``, ``fe``; loop at rest at t[0])."""
         fs = data["fs"]
@@ -597,15 +609,13 @@ class CutBlock(TimeBlock):
         super().__init__(ctx, name, [rec], fs, p_noise)
         self.kind = "cut"
 
-    tags = SIM_TAGS
-
-    def predict(self, p: ModelParams, i: int = 0) -> dict:
+    def predict(self, p: Model, i: int = 0) -> dict:
         case = self.ctx.case
         if same_rate(self.fs, case):
             return self.ctx.cut_sim(p, self.n_sim, self.k0)
         t = (self.k0 + np.arange(self.n_sim)) / self.fs
         return self.ctx.memo(
-            (p.key(SIM_TAGS), "cut-resampled", self.recording),
+            (p.key(SIM_GROUPS), "cut-resampled", self.recording),
             lambda: on_record_grid(case, t, lambda tc: case.simulate_path(p, tc)),
         )
 
@@ -614,7 +624,7 @@ class ForceBlock(Block):
     """The force channel of a cut: measured minus the chip model, white noise."""
 
     def __init__(
-        self, ctx: Context, cut: CutBlock, force: np.ndarray, p0: ModelParams
+        self, ctx: Context, cut: CutBlock, force: np.ndarray, p0: Model
     ) -> None:
         self.ctx = ctx
         self.cut = cut
@@ -628,16 +638,16 @@ class ForceBlock(Block):
             recording=cut.recording, kind="cut", domain="force", n=int(self.force.size)
         )
 
-    tags = SIM_TAGS
+    groups = SIM_GROUPS
 
-    def residual(self, p: ModelParams) -> np.ndarray:
+    def residual(self, p: Model) -> np.ndarray:
         return _finite((self.force - self.cut.predict(p)["force"]) / self.sigma)
 
 
 class FRFBlock(Block):
     """A measured FRF: complex log-ratio residual with estimated relative noise."""
 
-    tags = ("linear",)
+    groups = ("perturbation",)
     _OUT = {
         "frf-open-loop": "open_loop",
         "frf-closed-loop": ("reference", "sensor"),
@@ -651,7 +661,7 @@ class FRFBlock(Block):
         kind: str,
         freq: np.ndarray,
         frf: np.ndarray,
-        p0: ModelParams,
+        p0: Model,
     ) -> None:
         super().__init__(recording=name, kind=kind, domain="frf", n=0)
         self.ctx = ctx
@@ -675,14 +685,14 @@ class FRFBlock(Block):
         self.sigma = max(float(sig), FRF_FLOOR)
         self.n = 2 * int(self.freq.size) - (1 if self.gain else 0)
 
-    def model(self, p: ModelParams) -> np.ndarray:
+    def model(self, p: Model) -> np.ndarray:
         """Model FRF at the block's frequencies under ``p``."""
         return self.ctx.memo(
-            (p.key(("linear",)), "frf", self.recording),
+            (p.key(("perturbation",)), "frf", self.recording),
             lambda: self.ctx.case.paths(p, self.freq)[self.key],
         )
 
-    def _raw(self, p: ModelParams) -> np.ndarray:
+    def _raw(self, p: Model) -> np.ndarray:
         h = self.model(p)
         with np.errstate(all="ignore"):
             lr = np.log(self.frf / h)
@@ -692,16 +702,16 @@ class FRFBlock(Block):
             re = re - re.mean()
         return np.concatenate([re, ph])
 
-    def residual(self, p: ModelParams) -> np.ndarray:
+    def residual(self, p: Model) -> np.ndarray:
         return _finite(self._raw(p) / self.sigma)
 
-    def gain_offset(self, p: ModelParams) -> float:
+    def gain_offset(self, p: Model) -> float:
         """Fitted constant gain (measured / model), dimensionless."""
         h = self.model(p)
         return float(np.exp(np.mean(np.log(np.abs(self.frf / h)))))
 
 
-def tool_autocov_table(ctx: Context, p: ModelParams) -> np.ndarray:
+def tool_autocov_table(ctx: Context, p: Model) -> np.ndarray:
     """Autocovariance (m^2) of the stochastic tool error at integer sample lags.
 
     ``table[k]`` is the covariance at lag ``k / fs`` of the controller-rate tool
@@ -719,10 +729,10 @@ def tool_autocov_table(ctx: Context, p: ModelParams) -> np.ndarray:
         r = np.fft.irfft(s, n) * fs / 2.0
         return r[: n // 2]
 
-    return ctx.memo((p.key(("linear", "sensor_noise")), "toolcov"), table)
+    return ctx.memo((p.key(("perturbation", "machine")), "toolcov"), table)
 
 
-def tool_autocov(ctx: Context, p: ModelParams, lags: np.ndarray) -> np.ndarray:
+def tool_autocov(ctx: Context, p: Model, lags: np.ndarray) -> np.ndarray:
     """Autocovariance (m^2) of the stochastic tool error at ``lags`` (s)."""
     r = tool_autocov_table(ctx, p)
     k = np.abs(np.asarray(lags)) * ctx.case.fs
@@ -747,13 +757,21 @@ class PointsBlock(Block):
         Point coordinates in the workpiece frame, m.
     z : ndarray of shape (n,)
         Measured heights in m (finite).
-    p0 : ModelParams
+    p0 : Model
         Model the noise weighting and nuisance columns are built at.
     grid : tuple, optional
         ``(shape, flat_index)`` of a map, for pictures.
     """
 
-    tags = ("linear", "nonlin", "force", "path", "tool", "lines")
+    #: what the heights depend on (the lines are projected out of the residual)
+    predict_groups = SIM_GROUPS + ("path_z", "tool", "surface")
+    groups = predict_groups + ("base_lines",)
+
+    @property
+    def time_span(self) -> float:
+        """Span of the pass times of the cut points in s."""
+        t = self.tpass[np.isfinite(self.tpass)]
+        return float(np.ptp(t)) if t.size else 0.0
 
     def __init__(
         self,
@@ -763,7 +781,7 @@ class PointsBlock(Block):
         x: np.ndarray,
         y: np.ndarray,
         z: np.ndarray,
-        p0: ModelParams,
+        p0: Model,
         grid=None,
         along: np.ndarray | None = None,
     ) -> None:
@@ -853,7 +871,7 @@ class PointsBlock(Block):
         inner = inner[m:-m, m:-m] if m else inner
         return ~inner.ravel()[flat]
 
-    def _nuisance(self, p0: ModelParams) -> np.ndarray:
+    def _nuisance(self, p0: Model) -> np.ndarray:
         x, y = self.pts.x, self.pts.y
         cols = [np.ones_like(x)]
         if self.kind == "surface":
@@ -898,7 +916,7 @@ class PointsBlock(Block):
         cols.append(lap / dl**2 * 1e-12)
         return np.column_stack(cols)
 
-    def _build_weights(self, p0: ModelParams, h0: np.ndarray) -> None:
+    def _build_weights(self, p0: Model, h0: np.ndarray) -> None:
         fs = self.ctx.case.fs
         n = self.z.size
         if self.kind == "surface":
@@ -1216,24 +1234,24 @@ class PointsBlock(Block):
         out = np.concatenate(parts, axis=0)
         return out if two else out[:, 0]
 
-    def _predict(self, p: ModelParams) -> np.ndarray:
+    def _predict(self, p: Model) -> np.ndarray:
         from ._surface import surface_heights
 
         def run():
             return surface_heights(self.ctx.case, self.pts, p, self.ctx.trajectory(p))
 
-        return self.ctx.memo((p.key(self.tags[:-1]), "pts", id(self)), run)
+        return self.ctx.memo((p.key(self.predict_groups), "pts", id(self)), run)
 
-    def predict_all(self, p: ModelParams) -> np.ndarray:
+    def predict_all(self, p: Model) -> np.ndarray:
         """Model heights at every point of the recording (m)."""
         from ._surface import surface_heights
 
         return surface_heights(self.ctx.case, self.pts_all, p, self.ctx.trajectory(p))
 
-    def _line_cols(self, p: ModelParams) -> list:
+    def _line_cols(self, p: Model) -> list:
         """Whitened cos/sin pairs of the lines at the pass times (tool vibration)."""
         out = []
-        for f0 in p.line_frequencies:
+        for f0, _ in self.ctx.case.base_lines(p):
             c = np.zeros((self.z.size, 2))
             c[self.cut, 0] = np.cos(2 * np.pi * f0 * self.tpass[self.cut])
             c[self.cut, 1] = np.sin(2 * np.pi * f0 * self.tpass[self.cut])
@@ -1242,16 +1260,16 @@ class PointsBlock(Block):
             out.append((wc[:, 0], wc[:, 1]))
         return out
 
-    def residual(self, p: ModelParams) -> np.ndarray:
+    def residual(self, p: Model) -> np.ndarray:
         w = self._whiten(self.z - self._predict(p))
         w = w - self.q @ (self.q.T @ w)
-        if len(p.line_frequencies):
+        if self.ctx.case.base_lines(p):
             w = _remove_lines(
                 w, self._line_cols(p), _line_amplitudes(self.ctx.case, p, "tool")
             )
         return _finite(w)
 
-    def nuisance_fit(self, p: ModelParams) -> np.ndarray:
+    def nuisance_fit(self, p: Model) -> np.ndarray:
         """Unwhitened residual with the fitted nuisance and lines removed (m).
 
         Piston, tilt, registration and the sinusoids of ``p``'s lines at the pass
@@ -1259,11 +1277,12 @@ class PointsBlock(Block):
         """
         r = self.z - self._predict(p)
         x = self.X_raw
-        if len(p.line_frequencies):
+        lines = self.ctx.case.base_lines(p)
+        if lines:
             # the fitted sinusoids: the difference between the residual before and
             # after the known-amplitude line removal, mapped back by least squares
             cols = []
-            for f0 in p.line_frequencies:
+            for f0, _ in lines:
                 for fn in (np.cos, np.sin):
                     c = np.zeros(self.z.size)
                     c[self.cut] = fn(2 * np.pi * f0 * self.tpass[self.cut])

@@ -39,11 +39,11 @@ from ._blocks import (
     analysis_band,
     same_rate,
 )
-from ._catalogue import CATALOGUE, Effect, Locations
-from ._locate import Mismatch, locate
+from ._locate import gather, locate
 from ._manifest import Manifest, load_manifest
 from ._select import Engine, Term
-from ._sim import CaseModel, ModelParams
+from ._sim import CaseModel
+from .effects import CATALOGUE, Effect, Evidence, Model
 
 __all__ = ["Diagnosis", "diagnose", "build_case", "VERDICTS"]
 
@@ -74,8 +74,9 @@ class Diagnosis:
         What the locators still find after fitting.
     terms : list of Term
         Selected terms (physics and recalibration).
-    params : ModelParams
-        The fitted model.
+    model : Model
+        The fitted model (its terms simulate with
+        ``simulate(spec, hooks=model.hooks())``).
     explanations : list of dict
         JSON-ready selected physics terms.
     recalibration : list of dict
@@ -86,13 +87,18 @@ class Diagnosis:
         Share of the mismatch (excess deviance) left after fitting, 0..1.
     ranking : list of dict
         First-pass ranking of module configurations (top 10).
+    refused : list of dict
+        Candidates that would have been accepted but were refused (physically
+        implausible, or not seen where their physics says they must show), most
+        promising first: ``effect``, ``parameters`` (SI), ``reason``,
+        ``delta_deviance``, ``score``.
     """
 
     verdict: str
     mismatches: list
     remainder: list
     terms: list
-    params: ModelParams
+    model: Model
     explanations: list
     recalibration: list
     fit_before: dict
@@ -105,6 +111,7 @@ class Diagnosis:
     manifest: Manifest | None = None
     deviance: dict = field(default_factory=dict)
     tentative: list = field(default_factory=list)
+    refused: list = field(default_factory=list)
 
     @property
     def fit_before_percent(self) -> float:
@@ -134,6 +141,7 @@ class Diagnosis:
             "unexplained_power_fraction": self.unexplained_power_fraction,
             "ranking": self.ranking,
             "deviance": self.deviance,
+            "refused": self.refused,
         }
 
 
@@ -161,7 +169,7 @@ def build_case(man: Manifest) -> CaseModel:
         case = CaseModel(m, tp, specific_force=man.specific_force)
     except ModelError as exc:
         raise ConfigError(f"{man.path}: {exc}") from None
-    if not case.is_stable(ModelParams()):
+    if not case.is_stable(Model()):
         raise ConfigError(
             f"{man.path}: the nominal loop is unstable at this bandwidth "
             "and moving mass"
@@ -212,7 +220,7 @@ def _points_of(rec, case: CaseModel):
     return x[valid], y[valid], z[valid], None, s[valid]
 
 
-def _make_blocks(man: Manifest, ctx: Context, p: ModelParams) -> list:
+def _make_blocks(man: Manifest, ctx: Context, p: Model) -> list:
     case = ctx.case
     blocks = []
     for rec in man.recordings:
@@ -245,7 +253,7 @@ def _make_blocks(man: Manifest, ctx: Context, p: ModelParams) -> list:
         elif rec.kind == "cut":
             cb = CutBlock(ctx, rec.name, d, p)
             blocks.append(cb)
-            blocks.append(ForceBlock(ctx, cb, d["force"], ModelParams()))
+            blocks.append(ForceBlock(ctx, cb, d["force"], Model()))
         elif rec.kind in ("surface", "profile"):
             x, y, z, grid, along = _points_of(rec, case)
             if z.size < 16:
@@ -256,118 +264,13 @@ def _make_blocks(man: Manifest, ctx: Context, p: ModelParams) -> list:
     return blocks
 
 
-def _rebuild(blocks, ctx: Context, man: Manifest, p: ModelParams):
+def _rebuild(blocks, ctx: Context, man: Manifest, p: Model):
     """Blocks with the noise weighting of ``p`` (FRF and force noise levels kept)."""
     new = _make_blocks(man, ctx, p)
     for b_new, b_old in zip(new, blocks, strict=True):
         if isinstance(b_new, FRFBlock | ForceBlock):
             b_new.sigma = b_old.sigma
     return new
-
-
-def _locations(
-    case: CaseModel, blocks, mism: list[Mismatch], ctx: Context
-) -> Locations:
-    m = case.machine
-    spec = case.toolpath
-    loc = Locations(fs=case.fs, moving_mass=m.mechanics.moving_mass, k2=m.mechanics.k2)
-    strokes = []
-    currents = []
-    rec_len = 4096
-    # the current limit acts on the DAC command itself (ServoLoop's amplifier)
-    for b in blocks:
-        if isinstance(b, TimeBlock):
-            for i, rec in enumerate(b.records):
-                if "command" in rec:
-                    strokes.append(float(np.max(np.abs(rec["command"]))))
-                u = b.predict(ModelParams(), i)["u"]
-                currents.append(np.abs(u) * m.actuator.current_gain)
-        if isinstance(b, SpectralBlock):
-            # in controller samples: fs / record_length is the idle bin width
-            rec_len = b.nsamp * case.fs / b.fs
-    if spec is not None:
-        t = np.linspace(0, 0.05, 2000)
-        strokes.append(float(np.max(np.abs(spec.path.z_at(t)))))
-    loc.stroke = max(strokes) if strokes and max(strokes) > 1e-9 else 10e-6
-    if currents:
-        c = np.concatenate(currents)
-        # saturation levels placed on the observed demand: a log grid up to 98 % of
-        # the peak, then fractions 1 - {1e-2 ... 3e-4} of the peak (DISCOVERY 5.2)
-        peak = float(c.max())
-        lo, hi = np.quantile(c, 0.8), 0.98 * peak
-        if hi > lo > 0:
-            loc.current_levels = list(np.geomspace(lo, hi, 10)) + [
-                peak * (1 - x) for x in (1e-2, 3e-3, 1e-3, 3e-4)
-            ]
-    loc.record_length = rec_len
-    # modes and lines from the located mismatch
-    modes, lines, orders, map_lines = [], [], [], []
-    for mm in mism:
-        f = mm.details.get("frequency_hz")
-        if mm.test == "line" and f is not None:
-            lines.append((mm.significance, f))
-            if mm.domain in ("surface", "profile"):
-                map_lines.append(f)
-        if f is not None and f > 500 and mm.domain in ("frf", "time", "spectrum"):
-            modes.append(f)
-        if "band_hz" in mm.details and mm.domain in ("frf", "spectrum", "time"):
-            lo_, hi_ = mm.details["band_hz"]
-            if lo_ > 400:
-                modes.append(math.sqrt(lo_ * hi_))
-        if mm.test == "spindle-order":
-            orders.append(int(mm.details["order"]))
-    # FRF residual peaks
-    for b in blocks:
-        if isinstance(b, FRFBlock):
-            r = b.residual(ModelParams())
-            k = b.freq.size
-            mag = np.abs(r[:k]) + np.abs(r[k : 2 * k])
-            if mag.size > 5:
-                sm = np.convolve(mag, np.ones(3) / 3, mode="same")
-                j = int(np.argmax(sm))
-                if sm[j] > 4:
-                    modes.append(float(b.freq[j]))
-    for b in blocks:
-        orders += list(getattr(b, "order_candidates", []))
-    uniq = []
-    for f in modes:
-        if all(abs(math.log(f / g)) > 0.03 for g in uniq):
-            uniq.append(f)
-    loc.mode_freqs = uniq[:8]
-    lu = []
-    for _sig, f in sorted(lines, key=lambda v: -v[0]):
-        if all(abs(f - g) > 1.0 for g in lu):
-            lu.append(f)
-    loc.line_freqs = lu[:16]
-    loc.map_line_freqs = sorted(set(map_lines))
-    loc.orders = list(dict.fromkeys(orders + [1, 2, 3]))[:8]
-    d = m.disturbances.sensor_noise
-    from ..noise import evaluate_psd
-
-    loc.sensor_floor = d.floor
-    loc.sensor_corner = d.corner
-    loc.sensor_level = float(math.sqrt(evaluate_psd(d, np.array([1000.0]))[0]))
-    loc.nominal_delay = m.controller.delay
-    loc.specific_force = case.specific_force
-    loc.nominal = {
-        "moving_mass": m.mechanics.moving_mass,
-        "flexure_stiffness": m.mechanics.k2,
-        "flexure_damping": max(m.mechanics.c2, 1e-3),
-        "force_constant": m.actuator.force_constant,
-        "sensor_bandwidth": m.sensor.bandwidth,
-    }
-    loc.kinds = {b.kind for b in blocks}
-    if spec is not None and spec.kind == "lenslet":
-        loc.fts = float(spec.path.frequency)
-
-    def probe(f):
-        p0 = ModelParams()
-        s = case.noise_psd(p0, np.array([f]), "fe")[0]
-        h = abs(case.paths(p0, np.array([f]))[("base", "fe")][0])
-        return math.sqrt(2 * case.fs * max(s, 1e-40) / rec_len) / max(h, 1e-12)
-
-    loc.line_probe = probe
-    return loc
 
 
 def _refs(case: CaseModel) -> dict[str, float]:
@@ -379,7 +282,7 @@ def _refs(case: CaseModel) -> dict[str, float]:
     return refs
 
 
-def _fit_percent(blocks, p: ModelParams) -> dict[str, float]:
+def _fit_percent(blocks, p: Model) -> dict[str, float]:
     from ..servo import fit_percent
 
     out: dict[str, float] = {}
@@ -451,24 +354,22 @@ def _verdict(phys: bool, recal: bool, rem: list, explained: float,
     return "unexplained" if share < MIN_EXPLAINED_SHARE else "partly-explained"
 
 
-def _term_dict(t: Term, p: ModelParams, loc: Locations, fb: dict, fa: dict) -> dict:
+def _term_dict(t: Term, p: Model, ev: Evidence, fb: dict, fa: dict) -> dict:
     return {
         "effect": t.effect.name,
-        "parameters": t.effect.report(p, t.slot, loc),
+        "parameters": t.effect.report(p, t.slot),
         "delta_bic": float(t.score),
         "delta_deviance": float(t.delta_deviance),
         "fit_before_percent": _mean(
-            {k: fb[k] for k in fb if _visible(t.effect, k, fb)}
+            {k: fb[k] for k in fb if _visible(t.effect, k, ev)}
         ),
-        "fit_after_percent": _mean({k: fa[k] for k in fa if _visible(t.effect, k, fa)}),
+        "fit_after_percent": _mean({k: fa[k] for k in fa if _visible(t.effect, k, ev)}),
     }
 
 
-_KIND_OF: dict[str, str] = {}
-
-
-def _visible(eff: Effect, key: str, d: dict) -> bool:
-    kind = _KIND_OF.get(key.split(":")[0])
+def _visible(eff: Effect, key: str, ev: Evidence) -> bool:
+    """Whether the recording of a fit-percent key is one ``eff`` shows in."""
+    kind = ev.recording_kinds.get(key.split(":")[0])
     return kind is None or kind in eff.channels
 
 
@@ -519,11 +420,10 @@ def diagnose(
 
 
 def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
-    for rec in man.recordings:
-        _KIND_OF[rec.name] = rec.kind
+    kinds = {rec.name: rec.kind for rec in man.recordings}
     case = build_case(man)
     ctx = Context(case)
-    p0 = ModelParams()
+    p0 = Model()
     blocks0 = _make_blocks(man, ctx, p0)
     if progress:
         for rec in man.recordings:
@@ -536,25 +436,22 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
                     % analysis_band(fs, case)
                 )
     refs = _refs(case)
-    mism = locate(blocks0, p0, refs)
+    mism, ev = gather(case, blocks0, p0, refs, recording_kinds=kinds)
     if progress:
         progress(f"located {len(mism)} mismatches")
-    loc = _locations(case, blocks0, mism, ctx)
     effs = list(effects) if effects is not None else list(CATALOGUE)
 
     def relocate(p, blocks):
-        new = _locations(case, blocks, locate(blocks, p, refs), ctx)
-        new.current_levels = loc.current_levels or new.current_levels
-        new.line_freqs = list(dict.fromkeys(new.line_freqs + loc.line_freqs))[:16]
-        new.map_line_freqs = sorted(set(new.map_line_freqs + loc.map_line_freqs))
-        return new
+        # located on the residual of p; the rules of the effects keep what was
+        # found on the nominal model too (``previous``)
+        return gather(case, blocks, p, refs, recording_kinds=kinds, previous=ev)[1]
 
-    eng = Engine(blocks0, loc, effs, lambda p: _rebuild(blocks0, ctx, man, p), relocate)
+    eng = Engine(blocks0, ev, effs, lambda p: _rebuild(blocks0, ctx, man, p), relocate)
     p, terms, ranking = eng.run(max_terms=max_terms, progress=progress)
     blocks1 = _rebuild(blocks0, ctx, man, p)
     rem = locate(blocks1, p, refs)
     # deviance bookkeeping with the final weighting
-    eng_final = Engine(blocks1, loc, effs, None)
+    eng_final = Engine(blocks1, ev, effs, None)
     d_nom = eng_final.block_deviances(p0)
     d_fit = eng_final.block_deviances(p)
     n_b = [b.n for b in blocks1]
@@ -584,18 +481,23 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
     for eff, ts in _merge_terms(phys):
         params: dict = {}
         for t in ts:
-            params.update(eff.report(p, t.slot, loc))
-        d = _term_dict(ts[0], p, loc, fb, fa)
+            params.update(eff.report(p, t.slot))
+        d = _term_dict(ts[0], p, ev, fb, fa)
         d["parameters"] = params
         d["delta_bic"] = float(sum(t.score for t in ts))
         d["delta_deviance"] = float(sum(t.delta_deviance for t in ts))
         expl.append(d)
-    recal_d = [_term_dict(t, p, loc, fb, fa) for t in recal]
+    recal_d = [_term_dict(t, p, ev, fb, fa) for t in recal]
     remainder = bool(rem_v)
     tentative: list = []
     verdict = _verdict(bool(phys), bool(recal), rem, explained, left)
     if verdict == "unexplained" and phys:
         tentative, expl = expl, []
+    # refused candidates, most promising first (not those of an effect accepted
+    # with one term: another configuration of it was admitted)
+    accepted = {t.effect.name for t in terms if t.effect.max_terms == 1}
+    refused = [r.to_dict() for r in sorted(eng.refused.values(), key=lambda r: -r.score)
+               if r.effect not in accepted]
     rank = [
         {
             "effect": c.effect.name,
@@ -610,7 +512,7 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
         mismatches=mism,
         remainder=rem,
         terms=terms,
-        params=p,
+        model=p,
         explanations=expl,
         recalibration=recal_d,
         fit_before=fb,
@@ -629,4 +531,5 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
             "observations": int(sum(n_b)),
         },
         tentative=tentative,
+        refused=refused,
     )

@@ -33,12 +33,13 @@ from ._blocks import (
     SpectralBlock,
     TimeBlock,
 )
-from ._sim import ModelParams
+from .effects._base import Evidence, Model, Nominal
 
 __all__ = [
     "Mismatch",
     "ALPHA",
     "locate",
+    "gather",
     "third_octaves",
     "tag_frequency",
     "force_excess_logsf",
@@ -176,7 +177,7 @@ def _bands(freq, stat, dof, n_tests, rec, domain, test, label, lower=False):
     return out
 
 
-def _spectral(b: SpectralBlock, p: ModelParams, refs: dict) -> list[Mismatch]:
+def _spectral(b: SpectralBlock, p: Model, refs: dict) -> list[Mismatch]:
     s = b.expected(p)
     u = b.pbar / s
     R = b.nrec
@@ -241,7 +242,7 @@ def _fundamental(x: np.ndarray, fs: float, hint: float = 0.0) -> float:
     return k * df
 
 
-def _timeblock(b: TimeBlock, p: ModelParams, refs: dict, f0: float) -> list[Mismatch]:
+def _timeblock(b: TimeBlock, p: Model, refs: dict, f0: float) -> list[Mismatch]:
     out = []
     dom = "time"
     for i, (keep, w, f) in enumerate(b.meta):
@@ -439,7 +440,7 @@ def force_excess_logsf(r: np.ndarray) -> float:
     return float(sp.stats.norm.logsf(math.log(ms) / sd) / math.log(10.0))
 
 
-def _force(b: ForceBlock, p: ModelParams) -> list[Mismatch]:
+def _force(b: ForceBlock, p: Model) -> list[Mismatch]:
     r = b.residual(p)
     n = r.size
     lp = force_excess_logsf(r)
@@ -461,7 +462,7 @@ def _force(b: ForceBlock, p: ModelParams) -> list[Mismatch]:
     return []
 
 
-def _frf(b: FRFBlock, p: ModelParams) -> list[Mismatch]:
+def _frf(b: FRFBlock, p: Model) -> list[Mismatch]:
     r = b.residual(p)
     m = b.freq.size
     re, im = r[:m], r[m:] if r.size >= 2 * m else r[m:]
@@ -503,8 +504,10 @@ def _frf(b: FRFBlock, p: ModelParams) -> list[Mismatch]:
     return out
 
 
-def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
+def _points(b: PointsBlock, p: Model) -> tuple[list[Mismatch], list[int]]:
+    """Mismatches of a map or profile and its most significant spindle orders."""
     w = b.residual(p)
+    orders: list[int] = []
     out = []
     dom = b.domain
     n_unc = int((~b.cut).sum())
@@ -689,29 +692,15 @@ def _points(b: PointsBlock, p: ModelParams) -> list[Mismatch]:
                             {"order": int(h + 1), "amplitude_m": float(amp[h])},
                         )
                     )
-            b.order_candidates = [int(k + 1) for k in np.argsort(lp)[:4]]
-    return out
+            orders = [int(k + 1) for k in np.argsort(lp)[:4]]
+    return out, orders
 
 
-def locate(blocks, p: ModelParams, refs: dict[str, float]) -> list[Mismatch]:
-    """Run every locator on every block's residual under ``p``.
-
-    Parameters
-    ----------
-    blocks : list of Block
-        The likelihood blocks.
-    p : ModelParams
-        Model whose residual is examined (nominal: "where is the mismatch";
-        fitted: "what is left").
-    refs : dict of str to float
-        Reference frequencies (Hz) for harmonic tags: spindle, FTS, mains.
-
-    Returns
-    -------
-    list of Mismatch
-        Sorted by decreasing significance.
-    """
+def _locate(blocks, p: Model, refs: dict[str, float]):
+    """Mismatches (sorted by decreasing significance) and the spindle-order
+    candidates of the maps and profiles (in block order)."""
     out: list[Mismatch] = []
+    orders: list[int] = []
     for b in blocks:
         if isinstance(b, SpectralBlock):
             out += _spectral(b, p, refs)
@@ -725,6 +714,127 @@ def locate(blocks, p: ModelParams, refs: dict[str, float]) -> list[Mismatch]:
         elif isinstance(b, FRFBlock):
             out += _frf(b, p)
         elif isinstance(b, PointsBlock):
-            out += _points(b, p)
+            mm, ords = _points(b, p)
+            out += mm
+            orders += ords
     out.sort(key=lambda m: -m.significance)
-    return out
+    return out, orders
+
+
+def locate(blocks, p: Model, refs: dict[str, float]) -> list[Mismatch]:
+    """Run every locator on every block's residual under ``p``.
+
+    Parameters
+    ----------
+    blocks : list of Block
+        The likelihood blocks.
+    p : Model
+        Model whose residual is examined (nominal: "where is the mismatch";
+        fitted: "what is left").
+    refs : dict of str to float
+        Reference frequencies (Hz) for harmonic tags: spindle, FTS, mains.
+
+    Returns
+    -------
+    list of Mismatch
+        Sorted by decreasing significance.
+    """
+    return _locate(blocks, p, refs)[0]
+
+
+def gather(case, blocks, p: Model, refs: dict[str, float], *,
+           recording_kinds=None, previous: Evidence | None = None):
+    """Locate the mismatch of ``p`` and gather the evidence the effects place their
+    configurations by.
+
+    Parameters
+    ----------
+    case : CaseModel
+        The case.
+    blocks : list of Block
+        The likelihood blocks.
+    p : Model
+        Model whose residual is located.
+    refs : dict of str to float
+        Reference frequencies (Hz) for harmonic tags.
+    recording_kinds : mapping of str to str, optional
+        Recording name -> kind (from the manifest).
+    previous : Evidence, optional
+        The evidence located on the nominal model, when ``p`` is a fitted one.
+
+    Returns
+    -------
+    mismatches : list of Mismatch
+        As :func:`locate`.
+    evidence : Evidence
+        The case's facts, the mismatches, the nominal model's FRF residual peaks
+        and current demand, and the maps' spindle-order candidates.
+    """
+    from ..noise import evaluate_psd
+
+    mism, orders = _locate(blocks, p, refs)
+    m = case.machine
+    spec = case.toolpath
+    p0 = Model()
+    strokes = []
+    currents = []
+    rec_len = 4096
+    # the current limit acts on the DAC command itself (ServoLoop's amplifier)
+    for b in blocks:
+        if isinstance(b, TimeBlock):
+            for i, rec in enumerate(b.records):
+                if "command" in rec:
+                    strokes.append(float(np.max(np.abs(rec["command"]))))
+                u = b.predict(p0, i)["u"]
+                currents.append(np.abs(u) * m.actuator.current_gain)
+        if isinstance(b, SpectralBlock):
+            # in controller samples: fs / record_length is the idle bin width
+            rec_len = b.nsamp * case.fs / b.fs
+    if spec is not None:
+        t = np.linspace(0, 0.05, 2000)
+        strokes.append(float(np.max(np.abs(spec.path.z_at(t)))))
+    stroke = max(strokes) if strokes and max(strokes) > 1e-9 else 10e-6
+    # FRF residual peaks of the nominal model
+    peaks = []
+    for b in blocks:
+        if isinstance(b, FRFBlock):
+            r = b.residual(p0)
+            k = b.freq.size
+            mag = np.abs(r[:k]) + np.abs(r[k : 2 * k])
+            if mag.size > 5:
+                sm = np.convolve(mag, np.ones(3) / 3, mode="same")
+                j = int(np.argmax(sm))
+                if sm[j] > 4:
+                    peaks.append(float(b.freq[j]))
+    sn = m.disturbances.sensor_noise
+    nominal = Nominal(
+        moving_mass=m.mechanics.moving_mass,
+        flexure_stiffness=m.mechanics.k2,
+        flexure_damping=max(m.mechanics.c2, 1e-3),
+        force_constant=m.actuator.force_constant,
+        sensor_bandwidth=m.sensor.bandwidth,
+        delay=m.controller.delay,
+        sensor_floor=sn.floor,
+        sensor_corner=sn.corner,
+        sensor_level=float(math.sqrt(evaluate_psd(sn, np.array([1000.0]))[0])),
+        specific_force=case.specific_force,
+        max_current=m.actuator.max_current,
+        tool_radius=case.tool_radius(),
+    )
+    ev = Evidence(
+        fs=case.fs,
+        fts=float(spec.path.frequency)
+        if spec is not None and spec.kind == "lenslet" else 0.0,
+        stroke=stroke,
+        record_length=rec_len,
+        mismatches=tuple(mism),
+        frf_peaks=tuple(peaks),
+        order_candidates=tuple(orders),
+        current_demand=np.concatenate(currents) if currents else np.zeros(0),
+        kinds=frozenset(b.kind for b in blocks),
+        recording_kinds=dict(recording_kinds or {}),
+        nominal=nominal,
+        case=case,
+        previous=previous,
+    )
+    return mism, ev

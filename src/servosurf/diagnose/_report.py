@@ -23,7 +23,7 @@ from ._blocks import (
     TimeBlock,
 )
 from ._locate import third_octaves
-from ._sim import ModelParams
+from .effects import Model
 
 __all__ = ["figures", "fitted_machine_toml", "fitted_effects_toml"]
 
@@ -64,8 +64,8 @@ def _spectrum(b: SpectralBlock, d, path: Path) -> Path:
     fig, ax = figure(figsize=(8, 4.5))
     ax.loglog(b.freq, b.pbar, color="0.75", lw=0.6, label="measured (averaged)")
     for p, lab, st in (
-        (ModelParams(), "model before", "C0--"),
-        (d.params, "after", "C3-"),
+        (Model(), "model before", "C0--"),
+        (d.model, "after", "C3-"),
     ):
         ax.loglog(b.freq, b.expected(p), st, lw=1.2, label=lab)
     _marks(ax, d.mismatches, b.recording)
@@ -85,7 +85,7 @@ def _timeseries(b: TimeBlock, d, force: ForceBlock | None, path: Path) -> Path:
     t = (b.records[0].get("t0", 0.0) + np.arange(n) / b.fs) * 1e3
     if isinstance(b, CutBlock):
         t = (b.k0 + np.arange(n)) / b.fs * 1e3
-    for p, lab, c in ((ModelParams(), "before", "C0"), (d.params, "after", "C3")):
+    for p, lab, c in ((Model(), "before", "C0"), (d.model, "after", "C3")):
         r = b.residual_time(p, 0)
         ax[0].plot(t, r * 1e9, color=c, lw=0.5, label=f"residual {lab}")
         _, w, f = b.meta[0]
@@ -130,7 +130,7 @@ def _frf(b: FRFBlock, d, path: Path) -> Path:
     fig, ax = figure(2, 1, figsize=(8, 6), sharex=True)
     ax[0].loglog(b.freq, np.abs(b.frf), "k.", ms=2, label="measured")
     ax[1].semilogx(b.freq, np.degrees(np.angle(b.frf)), "k.", ms=2)
-    for p, lab, st in ((ModelParams(), "before", "C0--"), (d.params, "after", "C3-")):
+    for p, lab, st in ((Model(), "before", "C0--"), (d.model, "after", "C3-")):
         h = b.model(p) * (b.gain_offset(p) if b.gain else 1.0)
         ax[0].loglog(b.freq, np.abs(h), st, lw=1.1, label=lab)
         ax[1].semilogx(b.freq, np.degrees(np.angle(h)), st, lw=1.1)
@@ -147,8 +147,8 @@ def _frf(b: FRFBlock, d, path: Path) -> Path:
 def _points(b: PointsBlock, d, path: Path, nominal: PointsBlock | None) -> Path:
     from ..viz._common import figure, save
 
-    before = (nominal or b).nuisance_fit(ModelParams())
-    after = b.nuisance_fit(d.params)
+    before = (nominal or b).nuisance_fit(Model())
+    after = b.nuisance_fit(d.model)
     if b.kind == "surface" and b.grid is not None:
         shape, flat = b.grid
         fig, ax = figure(1, 2, figsize=(11, 4.5))
@@ -213,34 +213,27 @@ def figures(d, out: Path) -> dict[str, Path]:
 def fitted_machine_toml(d) -> str:
     """Machine TOML of the fitted model (``Machine.to_toml``).
 
-    The fitted delay, recalibrated parameters, current limit and sensor-noise shape
-    are machine parameters; the controller gains are written explicitly so that
+    What a machine file can hold is written into it: the loop perturbation (delay,
+    recalibrated parameters), the machine hooks (disturbance PSDs) and the loop's
+    current limit; the controller gains are written explicitly so that
     ``simulate`` and ``noise`` keep the installed controller. Effects a machine file
     cannot hold (modes, nonlinearities, tool and map terms) are listed in the
     header and in ``fitted-effects.toml``.
     """
     case = d.case
-    p = d.params
+    p = d.model
     m = case.machine_for(p)
     pidf = case.pidf
     c = dataclasses.replace(
         m.controller, kp=pidf.kp, ki=pidf.ki, kd=pidf.kd, tf=pidf.tf
     )
-    m = dataclasses.replace(m, controller=c)
-    if math.isfinite(p.max_current):
+    m = dataclasses.replace(m, controller=c,
+                            disturbances=case.hooked_machine(p).disturbances)
+    i_max = case.nonlinearity(p).max_current
+    if math.isfinite(i_max):
         m = dataclasses.replace(
             m,
-            actuator=dataclasses.replace(m.actuator, max_current=float(p.max_current)),
-        )
-    if p.sensor_floor is not None or p.sensor_corner is not None:
-        sn = m.disturbances.sensor_noise
-        sn = dataclasses.replace(
-            sn,
-            floor=sn.floor if p.sensor_floor is None else float(p.sensor_floor),
-            corner=sn.corner if p.sensor_corner is None else float(p.sensor_corner),
-        )
-        m = dataclasses.replace(
-            m, disturbances=dataclasses.replace(m.disturbances, sensor_noise=sn)
+            actuator=dataclasses.replace(m.actuator, max_current=float(i_max)),
         )
     lines = [
         f"fitted by servosurf diagnose to {d.manifest.path if d.manifest else ''}",
@@ -254,21 +247,23 @@ def fitted_machine_toml(d) -> str:
 
 
 def fitted_effects_toml(d) -> str:
-    """Every non-nominal knob of the fitted :class:`ModelParams` as TOML (SI)."""
+    """Every term of the fitted model as TOML (SI, unit-suffixed keys).
+
+    One table per effect (an array of tables for effects with several terms),
+    keys as in the JSON report; ``servosurf.diagnose.effects`` documents them.
+    """
     from ..config import dump_toml
 
-    p = d.params
-    out = {}
-    for f in dataclasses.fields(ModelParams):
-        v = getattr(p, f.name)
-        if v != f.default and v is not None:
-            key = f.name.replace("_", "-")
-            if isinstance(v, tuple):
-                v = [float(x) for x in v]
-            elif isinstance(v, float) and not math.isfinite(v):
-                continue
-            out[key] = v
+    effects = {t.effect.name: t.effect for t in d.terms}
+    out: dict = {}
+    for name in d.model.names:
+        eff = effects[name]
+        rows = [
+            {k.replace("_", "-"): v for k, v in eff.term(d.model, k_).report().items()}
+            for k_ in range(eff.slots(d.model))
+        ]
+        out[name] = rows if eff.max_terms > 1 else rows[0]
     return dump_toml(
         {"effects": out},
-        header="fitted effect knobs (SI units), see servosurf.diagnose.ModelParams",
+        header="fitted catalogue effects (SI units), see servosurf.diagnose.effects",
     )

@@ -17,7 +17,12 @@ DISCOVERY.md section 5.2, steps 3 to 5:
   space for positive parameters, with columns scaled by the solver;
 * **select**: the best exact score is accepted when positive; the noise weighting is
   rebuilt with the accepted terms and the loop repeats. After the forward pass
-  every term is tested by removal (backward step) with the same score.
+  every term is tested by removal (backward step) with the same score;
+* **physically plausible or not explained** (issue 19): a term is refused when
+  the channel logic finds no sign of it where its physics says it must show, or
+  when a parameter lies outside its physical bounds or sits at an end of its
+  search range (:meth:`Effect.implausible`); refused candidates that would have
+  been accepted are kept with the reason (:attr:`Engine.refused`).
 """
 
 from __future__ import annotations
@@ -28,10 +33,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy as sp
 
-from ._catalogue import Config, Effect, Locations
-from ._sim import ModelParams
+from .effects._base import Config, Effect, Evidence, Model
 
-__all__ = ["Engine", "Term", "Candidate"]
+__all__ = ["Engine", "Term", "Candidate", "Refusal"]
 
 #: Constant of the selection score. DISCOVERY.md's prototype used 6; calibrated on
 #: null cases it is 0: the largest best-candidate score of 60 null cases (the blind
@@ -69,6 +73,38 @@ class Term:
 
 
 @dataclass
+class Refusal:
+    """A candidate term that would have been accepted, and why it was not.
+
+    Attributes
+    ----------
+    effect : str
+        Effect name.
+    parameters : dict of str to float
+        The fitted term (report keys, SI).
+    reason : str
+        Why it was refused.
+    delta_deviance : float
+        Deviance reduction it made.
+    score : float
+        Its selection score had it been admitted.
+    """
+
+    effect: str
+    parameters: dict
+    reason: str
+    delta_deviance: float
+    score: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready form."""
+        return {"effect": self.effect, "parameters": self.parameters,
+                "reason": self.reason,
+                "delta_deviance": round(float(self.delta_deviance), 2),
+                "score": round(float(self.score), 2)}
+
+
+@dataclass
 class Candidate:
     """A ranked module configuration."""
 
@@ -86,31 +122,39 @@ class Engine:
     ----------
     blocks : list of Block
         Likelihood blocks (rebuilt through ``rebuild`` after each accepted term).
-    loc : Locations
-        Grid placement from the locators.
+    evidence : Evidence
+        What the locators found (the effects place their configurations by it).
     effects : sequence of Effect
         Candidate modules.
     rebuild : callable
         ``rebuild(p) -> blocks``: the blocks with their noise model at ``p``.
     relocate : callable, optional
-        ``relocate(p, blocks) -> Locations``: grids placed on the residual left
-        by ``p`` (new lines, modes and orders after a term is accepted).
+        ``relocate(p, blocks) -> Evidence``: the evidence located on the residual
+        left by ``p`` (new lines, modes and orders after a term is accepted).
     """
 
-    def __init__(self, blocks, loc: Locations, effects, rebuild, relocate=None) -> None:
+    def __init__(self, blocks, evidence: Evidence, effects, rebuild,
+                 relocate=None) -> None:
         self.blocks = list(blocks)
-        self.loc = loc
+        self.evidence = evidence
         self.effects = list(effects)
         self.rebuild = rebuild
         self.relocate = relocate
         self._cache: dict = {}
         self.n_total = int(sum(b.n for b in self.blocks))
         self.log = []
+        #: candidates refused although their score was positive, by effect (the
+        #: highest-scoring refusal of each)
+        self.refused: dict[str, Refusal] = {}
 
     # ------------------------------------------------------------ deviance
-    def block_residual(self, i: int, p: ModelParams) -> np.ndarray:
+    def block_residual(self, i: int, p: Model, cache: bool = True) -> np.ndarray:
+        """Whitened residual of block ``i`` under ``p`` (cached on the model's key
+        of the block's hook groups unless ``cache`` is False)."""
         b = self.blocks[i]
-        key = (i, id(b), p.key(b.tags))
+        if not cache:
+            return b.residual(p)
+        key = (i, id(b), p.key(b.groups))
         r = self._cache.get(key)
         if r is None:
             r = b.residual(p)
@@ -120,26 +164,26 @@ class Engine:
             self._cache[key] = r
         return r
 
-    def residuals(self, p: ModelParams) -> list[np.ndarray]:
+    def residuals(self, p: Model) -> list[np.ndarray]:
         """Whitened residual of every block."""
         return [self.block_residual(i, p) for i in range(len(self.blocks))]
 
-    def deviance(self, p: ModelParams) -> float:
+    def deviance(self, p: Model) -> float:
         """Total deviance (sum of squares of every block's residual)."""
         return float(sum(float(r @ r) for r in self.residuals(p)))
 
-    def block_deviances(self, p: ModelParams) -> list[float]:
+    def block_deviances(self, p: Model) -> list[float]:
         """Deviance per block."""
         return [float(r @ r) for r in self.residuals(p)]
 
     def _relevant(self, eff: Effect) -> list[int]:
-        return [i for i, b in enumerate(self.blocks) if set(b.tags) & set(eff.tags)]
+        return [i for i, b in enumerate(self.blocks) if set(b.groups) & eff.groups]
 
     # ------------------------------------------------------------ screening
-    def _templates(self, eff: Effect, p: ModelParams, cfg: Config, base: list):
+    def _templates(self, eff: Effect, p: Model, cfg: Config, base: list):
         cols = []
         idx = self._relevant(eff)
-        for q, _probe in eff.columns(p, cfg, self.loc):
+        for q, _probe in eff.columns(p, cfg, self.evidence):
             col = {i: self.block_residual(i, q) - base[i] for i in idx}
             cols.append(col)
         return cols
@@ -179,7 +223,7 @@ class Engine:
             pen += RECAL_PENALTY
         return pen
 
-    def screen(self, p: ModelParams, terms: list[Term]) -> list[Candidate]:
+    def screen(self, p: Model, terms: list[Term]) -> list[Candidate]:
         """Rank every configuration of every admissible module at ``p``."""
         base = self.residuals(p)
         out = []
@@ -190,7 +234,7 @@ class Engine:
                 continue
             if eff.max_terms == 1 and eff.active(p):
                 continue
-            cfgs = eff.configs(self.loc, p)
+            cfgs = eff.configs(self.evidence, p)
             if not cfgs:
                 continue
             for cfg in cfgs:
@@ -205,25 +249,25 @@ class Engine:
         return out
 
     # ------------------------------------------------------------ fitting
-    def _frees(self, p: ModelParams, terms: list[Term]):
+    def _frees(self, p: Model, terms: list[Term]):
         frees = []
         for t in terms:
-            frees += t.effect.free(p, t.slot, self.loc, t.config)
+            frees += t.effect.free(p, t.slot, self.evidence, t.config)
         return frees
 
     def fit(
         self,
-        p: ModelParams,
+        p: Model,
         terms: list[Term],
         *,
         max_nfev: int = 60,
         only_last: bool = False,
-    ) -> ModelParams:
+    ) -> Model:
         """Nonlinear least squares of the exact deviance over the terms' parameters.
 
         Parameters
         ----------
-        p : ModelParams
+        p : Model
             Start.
         terms : list of Term
             Terms whose parameters are free (``only_last``: the last one only).
@@ -232,7 +276,7 @@ class Engine:
 
         Returns
         -------
-        ModelParams
+        Model
             The fitted model (never worse than the start).
         """
         frees = self._frees(p, terms[-1:] if only_last else terms)
@@ -287,56 +331,7 @@ class Engine:
             pass
         return from_x(x0)
 
-    def _span(self, b) -> float:
-        """Longest coherent time span (s) of a block (for line frequency grids)."""
-        if hasattr(b, "tpass"):
-            t = b.tpass[np.isfinite(b.tpass)]
-            return float(np.ptp(t)) if t.size else 0.0
-        if hasattr(b, "records"):
-            return max(r["fe"].size for r in b.records) / b.fs
-        return 0.0
-
-    def line_frequency_search(self, p: ModelParams, term: Term) -> ModelParams:
-        """Grid search of a line's frequency before the local fit.
-
-        The deviance of long coherent records oscillates in frequency with period
-        ``1/T``; a local solver started a bin away would stop in a side minimum.
-        Stage 1 scans +-1.5 idle bins at ``1/(4 T)`` of the time records; stage 2
-        refines on every block at ``1/(6 T)`` of the longest map or profile around
-        the stage-1 frequency, its FTS sidebands and, when the idle records cannot
-        confirm the line (:meth:`_idle_blind`), the lines located on the maps
-        within reach that are not locked to the FTS motion.
-        """
-        i = term.slot
-        f0 = p.line_frequencies[i]
-        df = self.loc.fs / self.loc.record_length
-
-        def with_f(f):
-            t = list(p.line_frequencies)
-            t[i] = float(f)
-            return p.replace(line_frequencies=tuple(t))
-
-        def dev(q, which):
-            tot = 0.0
-            for k in which:
-                b = self.blocks[k]
-                r = b.residual(q) if "lines" in b.tags else self.block_residual(k, q)
-                tot += float(r @ r)
-            return tot
-
-        # where the idle records cannot confirm the line, the lines located on the
-        # maps are starts too (not those locked to the FTS motion: they would need
-        # the idle records)
-        eff = term.effect
-        starts = [
-            g for g in self.loc.map_line_freqs
-            if not eff.locked_to_fts(g, p, i, self.loc)
-        ] if self._idle_blind(p, term) else []
-        best = self._scan_line(p, f0, df, with_f, dev, i, starts)
-        q = with_f(best)
-        return q if self.deviance(q) <= self.deviance(p) else p
-
-    def _required_gain(self, eff: Effect, q: ModelParams, slot: int):
+    def required_gain(self, eff: Effect, q: Model, slot: int):
         """``(observed, expected)`` deviance reduction of term ``slot`` of ``q`` in
         the blocks of ``eff.require``'s domain (None without such blocks):
         observed on the data, expected if the term is true (the squared whitened
@@ -354,81 +349,49 @@ class Engine:
             expected += float((a - b) @ (a - b))
         return observed, expected
 
-    def _idle_blind(self, p: ModelParams, term: Term) -> bool:
-        """Whether the channel's blocks (the idle records of a line) cannot confirm
-        the term as started in ``p``: the gain it would make there if true is
-        below the fixed channel bar, or there are no such blocks."""
-        g = self._required_gain(term.effect, p, term.slot)
-        return g is None or g[1] < term.effect.require[1]
-
-    def _scan_line(self, p, f0, df, with_f, dev, slot: int, starts) -> float:
-        time_blocks = [
-            k
-            for k, b in enumerate(self.blocks)
-            if hasattr(b, "records") or b.domain == "spectrum"
-        ]
-        all_blocks = list(range(len(self.blocks)))
-
-        spans = [self._span(self.blocks[k]) for k in time_blocks]
-        t1 = max([s for s in spans if s > 0] or [1.0 / df])
-        grid = np.arange(f0 - 1.5 * df, f0 + 1.5 * df, 1.0 / (4 * t1))
-        best = min(grid, key=lambda f: dev(with_f(f), time_blocks))
-        t2 = max([self._span(b) for b in self.blocks] + [t1])
-        if t2 > 1.5 * t1:
-            # maps and profiles see the tool only while it cuts (a gate at the FTS
-            # frequency): a line and its gate sidebands f +- k f_FTS compete, so
-            # every alias is refined and the best kept
-            centres = (
-                [best + k * self.loc.fts for k in (-1, 0, 1)]
-                if self.loc.fts > 0
-                else [best]
-            )
-            # ``starts`` near f0 too (the lines located on the maps, where the idle
-            # records cannot see the line: a high-frequency base line the loop
-            # keeps out of the following error leaves the time records' minimum
-            # to noise, and the maps' own peaks are the better start). A line the
-            # idle records do see keeps their frequency (a map peak near it may be
-            # another line's sideband, which the channel logic would refuse).
-            reach = 1.5 * df + 2.0 * self.loc.fts
-            centres += [g for g in starts if abs(g - f0) <= reach]
-            # not onto another line of the model: two lines closer than the longest
-            # record resolves are one line split in two
-            others = [g for j, g in enumerate(p.line_frequencies) if j != slot]
-            centres = [c for c in centres if all(abs(c - g) > 1.0 / t2 for g in others)]
-            cands = []
-            done: list[float] = []
-            for c in centres:
-                if c <= 1.0 or any(abs(c - d) < 1.0 / (6 * t1) for d in done):
-                    continue
-                done.append(c)
-                fine = np.arange(c - 1.0 / (6 * t1), c + 1.0 / (6 * t1), 1.0 / (6 * t2))
-                fb = min(fine, key=lambda f: dev(with_f(f), all_blocks))
-                cands.append((dev(with_f(fb), all_blocks), fb))
-            best = min(cands)[1]
-        return float(best)
-
-    @staticmethod
-    def _distinct(c: Candidate, prev: list) -> bool:
-        """A second start of a module must differ (a mode 10 % away in frequency)."""
-        f = c.config.values.get("f")
-        if f is None:
-            return False
-        return all(abs(math.log(f / q.config.values.get("f", f))) > 0.1 for q in prev)
-
-    def _channel_ok(self, eff: Effect, q: ModelParams, term: Term) -> bool:
+    def _channel_ok(self, eff: Effect, q: Model, term: Term) -> bool:
         """Channel logic: the term must show where its physics says it must."""
-        g = self._required_gain(eff, q, term.slot)
-        if g is None:
-            return True
-        observed, expected = g
-        return observed >= eff.channel_bar(q, term.slot, self.loc, expected)
+        return self._channel_refusal(eff, q, term) is None
 
-    def level_search(self, p: ModelParams, eff: Effect, term: Term) -> ModelParams:
+    def _channel_refusal(self, eff: Effect, q: Model, term: Term) -> str | None:
+        """Why the channel logic refuses the term (None: it does not)."""
+        g = self.required_gain(eff, q, term.slot)
+        if g is None:
+            return None
+        observed, expected = g
+        bar = eff.channel_bar(q, term.slot, self.evidence, expected)
+        if observed >= bar:
+            return None
+        return (f"not confirmed by the {eff.require[0]} recordings: deviance "
+                f"reduction {observed:.1f} there (it predicts {expected:.1f}), "
+                f"{bar:.1f} required")
+
+    def refusal(self, eff: Effect, q: Model, term: Term) -> str | None:
+        """Why term ``term`` of ``q`` cannot be accepted (None: it can): the
+        channel logic, then the physical plausibility of its parameters."""
+        why = self._channel_refusal(eff, q, term)
+        if why is not None:
+            return why
+        return eff.implausible(q, term.slot, self.evidence, term.config)
+
+    def _refuse(self, eff: Effect, q: Model, term: Term, reason: str, lam: float,
+                score: float) -> None:
+        """Keep a refused candidate whose score would have admitted it."""
+        if not score > 0:
+            return
+        old = self.refused.get(eff.name)
+        if old is None or score > old.score:
+            self.refused[eff.name] = Refusal(eff.name, eff.report(q, term.slot),
+                                             reason, lam, score)
+
+    def level_search(self, p: Model, eff: Effect, term: Term) -> Model:
         """Best level of a threshold module: deviance at every configuration, then
-        a bounded search between the neighbours of the best one (log scale)."""
-        cfgs = eff.configs(self.loc, p)
-        qs = [eff.start(p, cfg, None, self.loc) for cfg in cfgs]
-        (f,) = eff.free(qs[0], term.slot, self.loc, term.config)
+        a bounded search between the neighbours of the best one (log scale).
+
+        ``p`` is the model without the new term ``term``."""
+        cfgs = eff.configs(self.evidence, p)
+        qs = [eff.start(p, cfg, None, self.evidence) for cfg in cfgs]
+        (f,) = eff.free(qs[0], term.slot, self.evidence, term.config)
         levels = np.array([float(f.get(q)) for q in qs])
         order = np.argsort(levels)
         levels = levels[order]
@@ -448,25 +411,26 @@ class Engine:
         )
         return f.set(q0, math.exp(res.x)) if res.fun <= vals[k] else q0
 
-    def _evaluate(self, c: Candidate, p: ModelParams, terms: list, d_cur: float,
+    def _evaluate(self, c: Candidate, p: Model, terms: list, d_cur: float,
                   progress=None):
         """Fit one ranked configuration with the accepted terms: (score, model,
-        term, deviance reduction); score ``-inf`` when the channel logic refuses
-        it."""
-        q = c.effect.start(p, c.config, c.coefs, self.loc)
+        term, deviance reduction); score ``-inf`` when it is refused
+        (:meth:`refusal`)."""
+        q = c.effect.start(p, c.config, c.coefs, self.evidence)
         slot = c.effect.slots(q) - 1
         tnew = Term(c.effect, slot, c.config)
-        if c.effect.threshold:
-            q = self.level_search(p, c.effect, tnew)
-        if c.effect.name == "base-vibration-lines":
-            q = self.line_frequency_search(q, tnew)
+        q = c.effect.refine(self, q, tnew)
         q = self.fit(q, terms + [tnew], only_last=True)
         if terms:
             q = self.fit(q, terms + [tnew])
         lam = d_cur - self.deviance(q)
-        n_cfg = max(len(c.effect.configs(self.loc, p)), 1)
+        n_cfg = max(len(c.effect.configs(self.evidence, p)), 1)
         score = lam - self.penalty(c.effect, n_cfg, c.config)
-        if not self._channel_ok(c.effect, q, tnew):
+        why = self.refusal(c.effect, q, tnew)
+        if why is not None:
+            self._refuse(c.effect, q, tnew, why, lam, score)
+            if progress and score > 0:
+                progress(f"{c.effect.name} [{c.config.label}]: refused ({why})")
             score = -math.inf
         if progress:
             progress(f"{c.effect.name} [{c.config.label}]: dD {lam:.1f}, "
@@ -479,14 +443,14 @@ class Engine:
 
         Returns
         -------
-        p : ModelParams
+        p : Model
             The selected model.
         terms : list of Term
             Accepted terms in order.
         ranking : list of Candidate
             The first ranking (the located mismatch against every module).
         """
-        p = ModelParams()
+        p = Model()
         terms: list[Term] = []
         ranking = None
         for _ in range(max_terms):
@@ -527,7 +491,7 @@ class Engine:
                 prev = seen.get(c.effect.name, [])
                 if len(prev) >= c.effect.n_start:
                     continue
-                if prev and not self._distinct(c, prev):
+                if prev and not c.effect.distinct(c.config, [q.config for q in prev]):
                     continue
                 # fit the best few, skipping those far behind the leader; threshold
                 # modules are searched on the deviance (their linear score is blind)
@@ -575,11 +539,58 @@ class Engine:
             p = self.fit(p, terms)
             # locate again on what is left: new lines, modes, orders to try
             if self.relocate is not None:
-                self.loc = self.relocate(p, self.blocks)
+                self.evidence = self.relocate(p, self.blocks)
         p, terms = self.prune(p, terms)
+        p, terms = self.enforce_plausibility(p, terms, progress)
         return p, terms, ranking or []
 
-    def prune(self, p: ModelParams, terms: list[Term]):
+    @staticmethod
+    def _without(terms: list[Term], j: int) -> list[Term]:
+        """``terms`` without term ``j`` (later slots of its effect move down)."""
+        t = terms[j]
+        return [
+            u
+            if u.effect is not t.effect or u.slot < t.slot
+            else Term(u.effect, u.slot - 1, u.config, u.delta_deviance, u.score)
+            for k, u in enumerate(terms)
+            if k != j
+        ]
+
+    def enforce_plausibility(self, p: Model, terms: list[Term], progress=None):
+        """Drop the terms the final refit left implausible (a parameter outside its
+        physical bounds or at an end of its search range), refitting the rest."""
+        changed = False
+        while True:
+            bad = None
+            for j, t in enumerate(terms):
+                why = t.effect.implausible(p, t.slot, self.evidence, t.config)
+                if why is not None:
+                    bad = (j, t, why)
+                    break
+            if bad is None:
+                break
+            j, t, why = bad
+            self._refuse(t.effect, p, t, why, t.delta_deviance, max(t.score, 1e-9))
+            if progress:
+                progress(f"{t.effect.name}: refused after the refit ({why})")
+            q = t.effect.remove(p, t.slot)
+            terms = self._without(terms, j)
+            p = self.fit(q, terms)
+            changed = True
+        if changed:
+            self._contributions(p, terms)
+        return p, terms
+
+    def _contributions(self, p: Model, terms: list[Term]) -> None:
+        """Removal cost (deviance) and score of each term at the model ``p``."""
+        d_full = self.deviance(p)
+        for t in terms:
+            q = t.effect.remove(p, t.slot)
+            t.delta_deviance = self.deviance(q) - d_full
+            n_cfg = max(len(t.effect.configs(self.evidence, p)), 1)
+            t.score = t.delta_deviance - self.penalty(t.effect, n_cfg, t.config)
+
+    def prune(self, p: Model, terms: list[Term]):
         """Backward step: drop terms whose removal does not cost their penalty."""
         changed = True
         while changed and len(terms) > 1:
@@ -588,15 +599,9 @@ class Engine:
             worst = None
             for j, t in enumerate(terms):
                 q = t.effect.remove(p, t.slot)
-                rest = [
-                    u
-                    if u.effect is not t.effect or u.slot < t.slot
-                    else Term(u.effect, u.slot - 1, u.config, u.delta_deviance, u.score)
-                    for k, u in enumerate(terms)
-                    if k != j
-                ]
+                rest = self._without(terms, j)
                 q = self.fit(q, rest, max_nfev=30)
-                n_cfg = max(len(t.effect.configs(self.loc, q)), 1)
+                n_cfg = max(len(t.effect.configs(self.evidence, q)), 1)
                 score = (self.deviance(q) - d_full) - self.penalty(
                     t.effect, n_cfg, t.config
                 )
@@ -606,10 +611,5 @@ class Engine:
                 p, terms = worst[1], worst[2]
                 changed = True
         # final contributions: removal cost of each term at the selected model
-        d_full = self.deviance(p)
-        for t in terms:
-            q = t.effect.remove(p, t.slot)
-            t.delta_deviance = self.deviance(q) - d_full
-            n_cfg = max(len(t.effect.configs(self.loc, p)), 1)
-            t.score = t.delta_deviance - self.penalty(t.effect, n_cfg, t.config)
+        self._contributions(p, terms)
         return p, terms

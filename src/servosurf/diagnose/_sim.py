@@ -1,9 +1,10 @@
 """The diagnosis simulator: the seed-paper loop with pluggable effect modules.
 
-:class:`ModelParams` holds every knob a catalogue effect can turn, all in SI units
-and all "off" by default, so ``ModelParams()`` is the nominal machine.
-:class:`CaseModel` evaluates one case (machine, bandwidth, moving mass, toolpath)
-under a :class:`ModelParams`:
+A :class:`~servosurf.diagnose.effects.Model` holds the terms of catalogue effects
+(``Model()`` is the nominal machine); each term is a hook of the protocol of
+:func:`servosurf.simulation.simulate`, composed here by the same functions
+(:mod:`servosurf._hooks`). :class:`CaseModel` evaluates one case (machine,
+bandwidth, moving mass, toolpath) under a model:
 
 * frequency domain (sampled-data approximation, as :meth:`ServoLoop.frf`): open-
   and closed-loop FRFs and the stochastic following-error and tool-error PSDs,
@@ -28,181 +29,22 @@ Decisions (documented here once):
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from dataclasses import dataclass
-
 import numpy as np
 
+from .. import _hooks
 from ..servo import (
     PIDF,
     LoopPerturbation,
     Machine,
     Nonlinearity,
     ServoLoop,
-    StructuralMode,
 )
+from .effects._base import Model
 
-__all__ = ["ModelParams", "CaseModel", "NOMINAL"]
-
-
-@dataclass(frozen=True)
-class ModelParams:
-    """Every knob of the diagnosis simulator, SI units, default = nominal machine.
-
-    Parameters
-    ----------
-    extra_delay : float
-        Loop delay added to the machine's, in s (may be negative down to minus
-        the nominal delay).
-    mode_frequency, mode_damping, mode_gain : float
-        Extra structural mode: natural frequency (Hz), damping ratio (-), static
-        compliance from actuator force to tool and sensor (m/N; 0 = no mode).
-    max_current : float
-        Current-demand saturation in A (``inf`` = none).
-    kf_b1, kf_b2 : float
-        Position dependence of the force constant, 1/m and 1/m^2.
-    flexure_k2, flexure_k3 : float
-        Quadratic (N/m^2) and cubic (N/m^3) flexure stiffness.
-    line_frequencies, line_amplitudes : tuple of float
-        Deterministic base-vibration lines: Hz and zero-to-peak base displacement
-        in m.
-    sensor_floor : float or None
-        White floor of the sensor noise, m/sqrt(Hz) (None = machine's).
-    sensor_corner : float or None
-        Roll-off corner of the sensor noise, Hz (None = machine's).
-    specific_force : float or None
-        Specific cutting force k_t in N/m^2 (None = case's).
-    sensor_a2, sensor_a3 : float
-        Sensor nonlinearity ``y = x + a2 x^2 + a3 x^3`` (1/m, 1/m^2).
-    drift_amplitude, drift_time_constant, drift_rate : float
-        Thermal drift ``a (1 - exp(-t / tau)) + b t`` of the tool height (m, s,
-        m/s).
-    spindle_orders, spindle_amplitudes, spindle_phases : tuple
-        Synchronous axial error ``sum a_h cos(h theta + phi_h)`` (integer orders,
-        m, rad).
-    waviness : tuple of float
-        Tool-edge waviness: Legendre coefficients (m) of orders 3, 4, ... in
-        ``phi / phi_ref`` (outward deviation of the edge).
-    radius_error : float
-        Tool nose radius error in m (tip held).
-    recovery : float
-        Elastic recovery: fraction of the local depth of cut that springs back (-).
-    moving_mass, flexure_stiffness, flexure_damping, force_constant : float or None
-        Recalibrated machine parameters (kg, N/m, N s/m, N/A; None = machine's).
-    sensor_bandwidth : float or None
-        Recalibrated -3 dB bandwidth of the position sensor, Hz (None = machine's).
-        Its lag is in every tracking record: 15 against 20 kHz changes the
-        following error of the 10 um, 100 Hz lenslet command by about 17 nm.
-    """
-
-    extra_delay: float = 0.0
-    mode_frequency: float = 0.0
-    mode_damping: float = 0.02
-    mode_gain: float = 0.0
-    max_current: float = math.inf
-    kf_b1: float = 0.0
-    kf_b2: float = 0.0
-    flexure_k2: float = 0.0
-    flexure_k3: float = 0.0
-    line_frequencies: tuple[float, ...] = ()
-    line_amplitudes: tuple[float, ...] = ()
-    sensor_floor: float | None = None
-    sensor_corner: float | None = None
-    specific_force: float | None = None
-    sensor_a2: float = 0.0
-    sensor_a3: float = 0.0
-    drift_amplitude: float = 0.0
-    drift_time_constant: float = 1.0
-    drift_rate: float = 0.0
-    spindle_orders: tuple[int, ...] = ()
-    spindle_amplitudes: tuple[float, ...] = ()
-    spindle_phases: tuple[float, ...] = ()
-    waviness: tuple[float, ...] = ()
-    radius_error: float = 0.0
-    recovery: float = 0.0
-    moving_mass: float | None = None
-    flexure_stiffness: float | None = None
-    flexure_damping: float | None = None
-    force_constant: float | None = None
-    sensor_bandwidth: float | None = None
-
-    def replace(self, **kw) -> ModelParams:
-        """Return a copy with some knobs changed."""
-        return dataclasses.replace(self, **kw)
-
-    # keys selecting cached discrete models
-    def linear_key(self) -> tuple:
-        """Knobs that change the linear loop (delay, mode, recalibration)."""
-        mode = (
-            (self.mode_frequency, self.mode_damping, self.mode_gain)
-            if self.mode_gain != 0.0 and self.mode_frequency > 0
-            else ()
-        )
-        return (
-            self.extra_delay,
-            mode,
-            self.moving_mass,
-            self.flexure_stiffness,
-            self.flexure_damping,
-            self.force_constant,
-            self.sensor_bandwidth,
-        )
-
-    def key(self, tags: tuple[str, ...]) -> tuple:
-        """Values of the knob groups ``tags`` (for caching what depends on them).
-
-        Groups: ``linear`` (delay, mode, recalibration), ``lines``,
-        ``sensor_noise``, ``nonlin`` (saturation, Kf(x), flexure), ``force``
-        (specific cutting force), ``path`` (sensor nonlinearity, drift, spindle),
-        ``tool`` (waviness, radius error, elastic recovery).
-        """
-        out = []
-        for t in tags:
-            if t == "linear":
-                out.append(self.linear_key())
-            elif t == "lines":
-                out.append((self.line_frequencies, self.line_amplitudes))
-            elif t == "sensor_noise":
-                out.append((self.sensor_floor, self.sensor_corner))
-            elif t == "nonlin":
-                out.append(
-                    (
-                        self.max_current,
-                        self.kf_b1,
-                        self.kf_b2,
-                        self.flexure_k2,
-                        self.flexure_k3,
-                    )
-                )
-            elif t == "force":
-                out.append(self.specific_force)
-            elif t == "path":
-                out.append(
-                    (
-                        self.sensor_a2,
-                        self.sensor_a3,
-                        self.drift_amplitude,
-                        self.drift_time_constant,
-                        self.drift_rate,
-                        self.spindle_orders,
-                        self.spindle_amplitudes,
-                        self.spindle_phases,
-                    )
-                )
-            elif t == "tool":
-                out.append((self.waviness, self.radius_error, self.recovery))
-            else:
-                raise ValueError(f"unknown knob group {t!r}")
-        return tuple(out)
-
-    @property
-    def has_mode(self) -> bool:
-        """True when an extra structural mode is active."""
-        return self.mode_gain != 0.0 and self.mode_frequency > 0.0
+__all__ = ["CaseModel", "NOMINAL"]
 
 
-NOMINAL = ModelParams()
+NOMINAL = Model()
 
 #: Output names of :meth:`ServoLoop.frf` as the diagnosis calls them.
 _OUT = {"following_error": "fe"}
@@ -226,10 +68,17 @@ class CaseModel:
     def __init__(
         self, machine: Machine, toolpath=None, *, specific_force: float | None = None
     ) -> None:
-        if specific_force is None:
-            from ..cutting import load_workpiece
+        import dataclasses
 
-            specific_force = load_workpiece(None).material.specific_thrust_pressure
+        from ..cutting import load_workpiece
+
+        wp = load_workpiece(None)
+        if specific_force is None:
+            specific_force = wp.material.specific_thrust_pressure
+        #: the workpiece the model's ``workpiece`` hooks change (its thrust pressure
+        #: is the case's)
+        self.workpiece = dataclasses.replace(wp, material=dataclasses.replace(
+            wp.material, specific_thrust_pressure=float(specific_force)))
         self.machine = machine
         self.toolpath = toolpath
         self.specific_force = float(specific_force)
@@ -238,37 +87,55 @@ class CaseModel:
         self.fs = float(machine.controller.sample_rate)
         self._cache: dict = {}
 
+    # ------------------------------------------------------------ hooks
+    def perturbation(self, model: Model) -> LoopPerturbation:
+        """The linear plant change of ``model`` (its ``perturbation`` hooks)."""
+        pert = _hooks.compose_perturbation(model.hooks("perturbation"))
+        return LoopPerturbation() if pert is None else pert
+
+    def nonlinearity(self, model: Model) -> Nonlinearity:
+        """The loop nonlinearities of ``model`` (its ``nonlinearity`` hooks)."""
+        nl = _hooks.compose_nonlinearity(model.hooks("nonlinearity"))
+        return Nonlinearity() if nl is None else nl
+
+    def base_lines(self, model: Model) -> tuple[tuple[float, float], ...]:
+        """Base-vibration lines of ``model``: ``(frequency in Hz, amplitude in m)``."""
+        return _hooks.compose_base_lines(model.hooks("base_lines"))
+
+    def hooked_machine(self, model: Model) -> Machine:
+        """The installed machine through ``model``'s ``machine`` hooks (the
+        diagnosis reads its disturbance PSDs)."""
+        return _hooks.apply_hooks(model.hooks("machine"), "machine", self.machine)
+
+    def path_z(self, model: Model, t, theta, r, z):
+        """Outside-the-loop tool-height terms of ``model`` in m (None: none)."""
+        return _hooks.compose_path_z(model.hooks("path_z"), t, theta, r, z)
+
+    def edge(self, model: Model, phi: np.ndarray):
+        """The tool terms of ``model`` at contact angles ``phi`` (rad): nose radius
+        change in m and outward edge deviation in m (None: none)."""
+        d_r = 0.0
+        dev = None
+        for h in model.hooks("tool"):
+            dr_h, w = h.edge(phi)
+            d_r += dr_h
+            if w is not None:
+                dev = w if dev is None else dev + w
+        return d_r, dev
+
+    def surface_heights(self, model: Model, z: np.ndarray, top: float) -> np.ndarray:
+        """Point heights ``z`` (m) through ``model``'s surface terms (pre-cut
+        height ``top`` in m)."""
+        for h in model.hooks("surface"):
+            z = h.surface_heights(z, top)
+        return z
+
     # ------------------------------------------------------------ machine
-    def perturbation(self, p: ModelParams) -> LoopPerturbation:
-        """The linear plant change of ``p`` (delay, mode, recalibration)."""
-        modes = ()
-        if p.has_mode:
-            modes = (StructuralMode(p.mode_frequency, p.mode_damping, p.mode_gain),)
-        return LoopPerturbation(
-            extra_delay=p.extra_delay,
-            modes=modes,
-            moving_mass=p.moving_mass,
-            flexure_stiffness=p.flexure_stiffness,
-            flexure_damping=p.flexure_damping,
-            force_constant=p.force_constant,
-            sensor_bandwidth=p.sensor_bandwidth,
-        )
-
-    def nonlinearity(self, p: ModelParams) -> Nonlinearity:
-        """The loop nonlinearities of ``p`` (saturation, Kf(x), flexure)."""
-        return Nonlinearity(
-            max_current=p.max_current,
-            kf_b1=p.kf_b1,
-            kf_b2=p.kf_b2,
-            flexure_k2=p.flexure_k2,
-            flexure_k3=p.flexure_k3,
-        )
-
-    def loop_for(self, p: ModelParams) -> ServoLoop:
+    def loop_for(self, p: Model) -> ServoLoop:
         """The simulator's loop under ``p`` with the installed (nominal) controller."""
         return self.loop.perturbed(self.perturbation(p))
 
-    def machine_for(self, p: ModelParams) -> Machine:
+    def machine_for(self, p: Model) -> Machine:
         """Machine with the recalibration and delay knobs of ``p`` applied."""
         return self.loop_for(p).machine
 
@@ -281,7 +148,7 @@ class CaseModel:
         )
 
     # ------------------------------------------------------------ frequency
-    def paths(self, p: ModelParams, freq: np.ndarray) -> dict:
+    def paths(self, p: Model, freq: np.ndarray) -> dict:
         """Closed-loop and open-loop responses at ``freq`` (Hz) under ``p``.
 
         The simulator's own FRFs (:meth:`ServoLoop.frf` and
@@ -308,28 +175,20 @@ class CaseModel:
             out[(inp, _OUT.get(outp, outp))] = h
         return out
 
-    def disturbance_psds(self, p: ModelParams, freq: np.ndarray) -> dict:
+    def disturbance_psds(self, p: Model, freq: np.ndarray) -> dict:
         """Disturbance PSDs Ws (m^2/Hz), Wi (A^2/Hz), Wg (m^2/Hz) under ``p``."""
         from ..noise import evaluate_psd
 
-        d = self.machine.disturbances
-        sn = d.sensor_noise
-        kw = {}
-        if p.sensor_floor is not None:
-            kw["floor"] = float(p.sensor_floor)
-        if p.sensor_corner is not None:
-            kw["corner"] = float(p.sensor_corner)
-        if kw:
-            sn = dataclasses.replace(sn, **kw)
+        d = self.hooked_machine(p).disturbances
         return {
-            "sensor_noise": evaluate_psd(sn, freq),
+            "sensor_noise": evaluate_psd(d.sensor_noise, freq),
             "current_noise": evaluate_psd(d.current_noise, freq),
             "base": evaluate_psd(d.base_vibration, freq),
         }
 
     def noise_psd(
         self,
-        p: ModelParams,
+        p: Model,
         freq: np.ndarray,
         output: str = "fe",
         paths: dict | None = None,
@@ -350,7 +209,7 @@ class CaseModel:
         return tot
 
     # ------------------------------------------------------------ time domain
-    def discrete(self, p: ModelParams):
+    def discrete(self, p: Model):
         """Discrete model ``(ad, bd, cx, nd, frac)`` of the loop under ``p``."""
         lp = self.loop_for(p)
         ad, bd, cx = lp.discrete_models()[:3]
@@ -362,13 +221,15 @@ class CaseModel:
         ac, bc, cc, dc = self.loop.discrete_models()[3:]
         return ac, bc, np.ascontiguousarray(cc.ravel()), float(dc.ravel()[0])
 
-    def kt(self, p: ModelParams) -> float:
-        """Specific thrust pressure under ``p`` in N/m^2."""
-        return (
-            self.specific_force if p.specific_force is None else float(p.specific_force)
-        )
+    def kt(self, p: Model) -> float:
+        """Specific thrust pressure under ``p`` in N/m^2 (its ``workpiece`` hooks)."""
+        hooks = p.hooks("workpiece")
+        if not hooks:
+            return self.specific_force
+        return float(_hooks.apply_hooks(hooks, "workpiece", self.workpiece)
+                     .material.specific_thrust_pressure)
 
-    def facing_force(self, p: ModelParams, t: np.ndarray) -> np.ndarray:
+    def facing_force(self, p: Model, t: np.ndarray) -> np.ndarray:
         """Steady facing thrust ``k_t A`` (N), ramped in over the first revolution.
 
         As :func:`servosurf.simulation.simulate`: the feed-limited chip section of
@@ -385,7 +246,7 @@ class CaseModel:
         ramp = np.clip((t - t[0]) * path.rev_per_s, 0.0, 1.0)
         return self.kt(p) * self._cache[key] * ramp
 
-    def simulate_path(self, p: ModelParams, t: np.ndarray) -> dict[str, np.ndarray]:
+    def simulate_path(self, p: Model, t: np.ndarray) -> dict[str, np.ndarray]:
         """Cut the case's toolpath at times ``t`` (s), loop at rest at ``t[0]``.
 
         Lenslets: the chip force of a round tool plunging into the flat face at
@@ -399,7 +260,7 @@ class CaseModel:
 
     def simulate(
         self,
-        p: ModelParams,
+        p: Model,
         *,
         reference: np.ndarray,
         force: np.ndarray | None = None,
@@ -411,7 +272,7 @@ class CaseModel:
 
         Parameters
         ----------
-        p : ModelParams
+        p : Model
             Effects.
         reference : ndarray of shape (n,)
             Commanded tool height in m (loop at rest before the first sample).
@@ -451,6 +312,6 @@ class CaseModel:
         }
 
     # ------------------------------------------------------------ stability
-    def is_stable(self, p: ModelParams) -> bool:
+    def is_stable(self, p: Model) -> bool:
         """True when the discrete closed loop under ``p`` is stable (linear part)."""
         return self.loop.is_stable(perturbation=self.perturbation(p))

@@ -8,11 +8,12 @@ round-nose arc over the passes that reach it (the model of
 ``z = min(top, min_k [z_tool(t_k) + R' - sqrt(R'^2 - dr_k^2) - W(phi_k) / cos(phi_k)])``
 
 with ``t_k`` the time the tool passes the point's angle, ``dr_k`` its radial offset
-from the tool, ``R' = R + radius_error`` and ``W`` the edge waviness. The tool
+from the tool, ``R' = R + dR`` and ``W`` the nose radius change and the edge
+deviation of the model's tool terms (their pointwise ``edge`` hooks). The tool
 height ``z_tool(t) = x1(t) + d_path(t, theta)`` is the deterministic loop
-response (periodic after the start-up, extended periodically) plus the
-outside-the-loop terms (sensor nonlinearity, thermal drift, spindle axial error).
-Elastic recovery raises the result by ``recovery * (top - z)``.
+response (periodic after the start-up, extended periodically) plus the model's
+outside-the-loop ``path_z`` terms; its surface terms (``surface_heights`` hooks,
+e.g. elastic recovery) act on the result.
 
 For lenslet paths each ring passes a point once; for facing the nearest five passes
 are evaluated. Written for the diagnosis (no dependency on the surface simulator);
@@ -25,15 +26,14 @@ import math
 
 import numpy as np
 
-from ._sim import CaseModel, ModelParams
+from ._sim import CaseModel
+from .effects._base import Model
 
 __all__ = [
     "PointSet",
     "ToolTrajectory",
     "tool_trajectory",
     "surface_heights",
-    "legendre_waviness",
-    "path_terms",
 ]
 
 
@@ -117,7 +117,7 @@ class ToolTrajectory:
 
 
 def tool_trajectory(
-    case: CaseModel, p: ModelParams, *, periods: int = 12, sim: dict | None = None
+    case: CaseModel, p: Model, *, periods: int = 12, sim: dict | None = None
 ) -> ToolTrajectory:
     """Simulate the cut of the case's toolpath under ``p`` (deterministic part).
 
@@ -125,7 +125,7 @@ def tool_trajectory(
     ----------
     case : CaseModel
         Case with a toolpath.
-    p : ModelParams
+    p : Model
         Effects.
     periods : int, default: 12
         Lenslet periods simulated before the steady state is extended (the loop
@@ -166,59 +166,10 @@ def tool_trajectory(
     return ToolTrajectory(t, x1, period)
 
 
-def legendre_waviness(phi: np.ndarray, coefs, phi_ref: float) -> np.ndarray:
-    """Edge deviation ``sum c_k P_{k+3}(phi / phi_ref)`` in m (orders 3, 4, ...)."""
-    if not len(coefs):
-        return np.zeros_like(phi)
-    u = np.clip(phi / phi_ref, -1.5, 1.5)
-    c = np.zeros(3 + len(coefs))
-    c[3:] = coefs
-    return np.polynomial.legendre.legval(u, c)
-
-
-def path_terms(
-    case: CaseModel,
-    p: ModelParams,
-    t: np.ndarray,
-    theta: np.ndarray,
-    z_tool: np.ndarray,
-) -> np.ndarray:
-    """Outside-the-loop tool-height terms in m.
-
-    Sensor nonlinearity ``-a2 z^2 - a3 z^3`` (the loop makes the *reading* follow
-    the command, so the tool misses by the inverse nonlinearity), thermal drift
-    ``a (1 - exp(-t / tau)) + b t`` and the synchronous spindle axial error
-    ``sum a_h cos(h theta + phi_h)``.
-    """
-    dz = np.zeros(np.shape(t))
-    if p.sensor_a2 or p.sensor_a3:
-        dz -= p.sensor_a2 * z_tool**2 + p.sensor_a3 * z_tool**3
-    if p.drift_amplitude:
-        dz += p.drift_amplitude * -np.expm1(-t / max(p.drift_time_constant, 1e-9))
-    if p.drift_rate:
-        dz += p.drift_rate * t
-    for h, a, ph in zip(
-        p.spindle_orders, p.spindle_amplitudes, p.spindle_phases, strict=True
-    ):
-        dz += a * np.cos(h * theta + ph)
-    return dz
-
-
-def phi_reference(case: CaseModel) -> float:
-    """Contact angle (rad) spanned by the cut: the waviness basis runs over it."""
-    spec = case.toolpath
-    r = spec.tool.nose_radius
-    depth = (
-        spec.path.depth_of_cut if spec.kind == "lenslet" else spec.path.feed_per_rev * 4
-    )
-    half = min(math.sqrt(max(2 * r * depth - depth * depth, 0.0)), spec.tool.half_width)
-    return max(math.asin(min(half / r, 1.0)), 1e-6)
-
-
 def surface_heights(
     case: CaseModel,
     pts: PointSet,
-    p: ModelParams,
+    p: Model,
     traj: ToolTrajectory,
     *,
     noise=None,
@@ -233,7 +184,7 @@ def surface_heights(
         The case.
     pts : PointSet
         Points and passes.
-    p : ModelParams
+    p : Model
         Effects (tool, path and map terms are used here; loop terms through
         ``traj``).
     traj : ToolTrajectory
@@ -253,28 +204,35 @@ def surface_heights(
     ndarray of shape (n,)
         Heights in m (``top`` where no pass reaches).
     """
-    R = pts.radius + p.radius_error
     t = pts.t_r
+    dr = pts.dr_r
     z_tool = traj(t)
-    zt = z_tool + path_terms(case, p, t, pts.theta_r, z_tool)
+    zt = z_tool
+    if p.hooks("path_z"):
+        # radius of the tool at each pass: the point's radius less its offset
+        r_tool = np.broadcast_to(pts.r[:, None], pts.t.shape).ravel()[pts.flat] - dr
+        dz = case.path_z(p, t, pts.theta_r, r_tool, z_tool)
+        zt = z_tool + dz
     if noise is not None:
         zt = zt + noise(t)
-    dr = pts.dr_r
     with np.errstate(invalid="ignore"):
-        arc = R - np.sqrt(np.maximum(R * R - dr * dr, 0.0))
-        if len(p.waviness):
+        phi = None
+        dev = None
+        d_r = 0.0
+        if p.hooks("tool"):
             phi = np.arcsin(np.clip(dr / pts.radius, -1.0, 1.0))
-            arc = arc - legendre_waviness(
-                phi, p.waviness, phi_reference(case)
-            ) / np.cos(phi)
+            d_r, dev = case.edge(p, phi)
+        R = pts.radius + d_r
+        arc = R - np.sqrt(np.maximum(R * R - dr * dr, 0.0))
+        if dev is not None:
+            arc = arc - dev / np.cos(phi)
     h = np.full(pts.t.shape, np.inf)
     h.ravel()[pts.flat] = zt + arc
     k = np.argmin(h, axis=1)
     hmin = h[np.arange(h.shape[0]), k]
     cut = hmin < top
     z = np.where(cut, hmin, top)
-    if p.recovery:
-        z = z + p.recovery * (top - z)
+    z = case.surface_heights(p, z, top)
     if return_pass:
         # how far the runner-up pass is above the active one (inf: only one pass)
         if h.shape[1] > 1:

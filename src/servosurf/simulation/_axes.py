@@ -142,7 +142,8 @@ def simulate_axes(spec, tool, machine, workpiece, parts, *, seed: int, instrumen
         surface = sweep(path, tool, kfield, initial=_initial(spec, workpiece),
                         n_threads=n_threads)
         surface = _physical(spec, surface)
-    ctx = {"spec": spec, "machine": machine, "t": t, "z_command": z_cmd,
+    ctx = {"spec": spec, "machine": machine, "workpiece": workpiece, "t": t,
+           "z_command": z_cmd,
            "deviation": dev, "force": np.zeros(t.size), "seed": seed}
     for h in hooks:
         if hasattr(h, "surface"):

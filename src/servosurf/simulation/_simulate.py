@@ -29,10 +29,17 @@
 4. **Instrument** (optional): an interferometer model (resampling, optical blur,
    slope dropout, height noise).
 
-A *hook* is any object with any of the optional methods ``machine(machine) ->
-Machine``, ``tool(tool) -> Tool``, ``path_z(t, theta, r, z_cmd) -> dz`` (m) and
-``surface(surface, context) -> Surface``; the discrepancy catalogue plugs its
-effects in this way.
+A *hook* is any object with any of the optional methods of the protocol in
+:mod:`servosurf._hooks`: ``machine(machine) -> Machine``, ``workpiece(workpiece) ->
+Workpiece``, ``tool(tool) -> Tool``, ``path_z(t, theta, r, z) -> dz`` (m; ``z`` the
+deterministic tool height the loop delivers),
+``surface(surface, context) -> Surface``, and for the FTS loop itself
+``perturbation() -> LoopPerturbation`` (plant change under the installed
+controller), ``nonlinearity() -> dict`` (fields of
+:class:`servosurf.servo.Nonlinearity`) and ``base_lines()`` (deterministic base
+sinusoids ``(frequency, amplitude)``, through the loop from zero phase). The
+discrepancy catalogue's fitted terms are hooks
+(``simulate(spec, hooks=diagnosis.model.hooks())``).
 """
 
 from __future__ import annotations
@@ -44,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _parts, _progress
+from .. import _hooks, _parts, _progress
 from ..cutting import ChipModel, Workpiece, facing_chip_area, load_workpiece
 from ..errors import ConfigError
 from ..run import RunConfig, load_run
@@ -170,9 +177,20 @@ def simulate(
             machine = h.machine(machine)
         if hasattr(h, "tool"):
             tool = h.tool(tool)
+        if hasattr(h, "workpiece"):
+            workpiece = h.workpiece(workpiece)
     if tool is not spec.tool:
         spec = dataclasses.replace(spec, tool=tool)
+    # hooks on the FTS loop itself (the diagnosis's fitted loop effects)
+    pert = _hooks.compose_perturbation(hooks)
+    nonlin = _hooks.compose_nonlinearity(hooks)
+    lines = _hooks.compose_base_lines(hooks)
     if (parts is not None and KINEMATIC in parts) or machine.axis.model != "fts":
+        if pert is not None or nonlin is not None or lines:
+            raise ConfigError(
+                "hooks with perturbation(), nonlinearity() or base_lines() act on "
+                "the FTS servo loop; allowed only on an FTS machine without the "
+                f"{KINEMATIC!r} part")
         from ._axes import simulate_axes
 
         return simulate_axes(spec, tool, machine, workpiece, parts, seed=int(seed),
@@ -187,7 +205,8 @@ def simulate(
     _check_nyquist(spec, fs)
 
     with _progress.stage("servo loop"):
-        loop = ServoLoop(machine)
+        # the installed controller on the (hook-perturbed) plant
+        loop = ServoLoop(machine).perturbed(pert)
         if not loop.is_stable():
             raise ConfigError(
                 f"the loop is unstable at {machine.controller.bandwidth:g} Hz with "
@@ -213,7 +232,7 @@ def simulate(
         tracking = "tracking" in parts
         ref = z_cmd if tracking else np.zeros(n)
         offset = None if tracking else z_cmd
-        base = loop.simulate(reference=ref)
+        base = loop.simulate(reference=ref, nonlinearity=nonlin)
         dev["tracking"] = (base["tool"] - z_cmd) if tracking else np.zeros(n)
         force = np.zeros(n)
         # copies: the loop outputs are views of one (5, n) buffer, freed below
@@ -226,10 +245,12 @@ def simulate(
                     reference=ref,
                     chip=ChipModel(kt, tool.nose_radius, top),
                     chip_offset=offset,
+                    nonlinearity=nonlin,
                 )
             elif spec.kind == "surface":  # finishing pass: facing chip, local feed
                 cut = loop.simulate(
-                    reference=ref, force=_design_force(spec.path, tool, kt, t)
+                    reference=ref, force=_design_force(spec.path, tool, kt, t),
+                    nonlinearity=nonlin,
                 )
             else:  # facing: steady feed-limited chip, ramped in over one revolution
                 p = spec.path
@@ -237,7 +258,8 @@ def simulate(
                     tool.nose_radius, p.feed_per_rev, p.depth_of_cut
                 )
                 ramp = np.clip((t - t[0]) * p.rev_per_s, 0.0, 1.0)
-                cut = loop.simulate(reference=ref, force=kt * area * ramp)
+                cut = loop.simulate(reference=ref, force=kt * area * ramp,
+                                    nonlinearity=nonlin)
             dev["force"] = cut["tool"] - base["tool"]
             force = cut["force"].copy()
             fol = cut["following_error"].copy()
@@ -254,12 +276,29 @@ def simulate(
         # parts outside the loop (issue 18): out-of-loop frame motion, spindle error
         dev.update(_parts.outside_loop(loop, parts, n, seed))
         extra = np.zeros(n)
-        for h in hooks:
-            if hasattr(h, "path_z"):
-                theta, radius = spec.path.theta_at(t), spec.path.radius_at(t)
-                extra = extra + np.asarray(
-                    h.path_z(t, theta, radius, z_cmd), dtype=float
-                )
+        if any(hasattr(h, "path_z") for h in hooks):
+            # the deterministic tool height the loop delivers (command plus its
+            # tracking and force deviations): what a term outside the loop, e.g.
+            # a sensor's nonlinear reading of the actual position, depends on
+            z_loop = z_cmd + dev["tracking"] + dev["force"]
+            theta, radius = spec.path.theta_at(t), spec.path.radius_at(t)
+            for h in hooks:
+                if hasattr(h, "path_z"):
+                    extra = extra + np.asarray(
+                        h.path_z(t, theta, radius, z_loop), dtype=float
+                    )
+        if lines:
+            # deterministic base lines through the loop (steady state)
+            f0 = np.array([f for f, _ in lines])
+            paths = loop.frf(f0).paths
+            for j, (f, a) in enumerate(lines):
+                for out, key in ((None, "tool"), ("fol", "following_error")):
+                    h_ = paths[("base", key)][j]
+                    wave = a * abs(h_) * np.cos(2 * np.pi * f * t + np.angle(h_))
+                    if out is None:
+                        extra = extra + wave
+                    else:
+                        fol = fol + wave
         dev["hooks"] = extra
 
     kfield = _kernel_field(spec)
@@ -283,6 +322,7 @@ def simulate(
     ctx = {
         "spec": spec,
         "machine": machine,
+        "workpiece": workpiece,
         "t": t,
         "z_command": z_cmd,
         "deviation": dev,
