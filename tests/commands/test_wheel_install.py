@@ -81,12 +81,14 @@ def test_wheel_install_runs_every_readme_command(tmp_path):
     purelib = subprocess.run(
         [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
         check=True, capture_output=True, text=True).stdout.strip()
-    # the dependencies come from this environment, after the venv's own packages
-    (Path(purelib) / "zz_test_environment.pth").write_text(
-        "\n".join(_site_dirs()) + "\n")
+    # the wheel first: with this environment visible, pip would find its own
+    # (non-editable) servosurf of the same version "already satisfied" and skip
     subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install",
                     "--no-deps", "--no-index", "-q", str(wheel)], check=True,
                    capture_output=True, text=True)
+    # the dependencies come from this environment, after the venv's own packages
+    (Path(purelib) / "zz_test_environment.pth").write_text(
+        "\n".join(_site_dirs()) + "\n")
     bindir = Path(sysconfig.get_path("scripts", vars={"base": str(venv)}))
     env = {k: v for k, v in os.environ.items()
            if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "SERVOSURF_QUIET")}
