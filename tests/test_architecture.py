@@ -22,21 +22,9 @@ SRC = Path(servosurf.__file__).resolve().parent
 #: Units of the architecture: a subpackage or a top-level module of servosurf.
 LAYERS = servosurf.LAYERS
 
-#: Known violations of the diagnose package (it is being restructured on its own
-#: branch; the lead removes these after that merge). Each is (kind, source unit or
-#: module, target), kind one of "up", "private", "cycle", "njit", "rng".
-ALLOWED = {
-    # the diagnose command draws the diagnosis's figures through a private module
-    ("private", "servosurf.commands.diagnose", "servosurf.diagnose._report"),
-    # simulate writes manifest.toml with diagnose's private manifest writer (the
-    # effects merge should export simulation_manifest/DIAGNOSABLE_TOOLPATHS)
-    ("private", "servosurf.commands.simulate", "servosurf.diagnose._manifest"),
-    # diagnose's report draws with viz's private figure helpers
-    ("private", "servosurf.diagnose._report", "servosurf.viz._common"),
-    # diagnose limits BLAS threads through its own ctypes/threadpoolctl helper
-    # instead of servosurf._defaults.blas_threads
-    ("knob", "servosurf.diagnose._threads", ""),
-}
+#: Known violations, each (kind, source unit or module, target), kind one of "up",
+#: "private", "cycle", "njit", "rng", "knob". None is left: keep it empty.
+ALLOWED: set[tuple[str, str, str]] = set()
 
 
 def _modules() -> dict[str, Path]:

@@ -69,8 +69,12 @@ def run(args) -> int:
     import sys
 
     from .._progress import is_quiet, stage
-    from ..diagnose import diagnose
-    from ..diagnose._report import figures, fitted_effects_toml, fitted_machine_toml
+    from ..diagnose import (
+        diagnose,
+        fitted_effects_toml,
+        fitted_machine_toml,
+        write_figures,
+    )
     from ._common import atomic_write, output_folder, print_json, write_json
 
     def progress(msg: str) -> None:
@@ -85,7 +89,7 @@ def run(args) -> int:
         atomic_write(out / "fitted-machine.toml", lambda p: p.write_text(text))
         eff = fitted_effects_toml(d)
         atomic_write(out / "fitted-effects.toml", lambda p: p.write_text(eff))
-        figs = figures(d, out)
+        figs = write_figures(d, out)
     summary = d.to_dict()
     summary["files"] = {
         "fitted_machine": str(out / "fitted-machine.toml"),

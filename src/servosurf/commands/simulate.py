@@ -358,7 +358,7 @@ def _write_manifest(args, res, surf, map_file, out):
     from pathlib import Path
 
     from .._builtins import resolve_file
-    from ..diagnose._manifest import DIAGNOSABLE_TOOLPATHS, simulation_manifest
+    from ..diagnose import DIAGNOSABLE_TOOLPATHS, simulation_manifest
     from ..simulation import DEFAULT_PARTS
 
     if res.spec.kind not in DIAGNOSABLE_TOOLPATHS or args.tool or (

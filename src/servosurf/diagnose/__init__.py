@@ -11,7 +11,21 @@ module accounts for the mismatch. See ``/work/shared/DISCOVERY.md`` for the desi
 
 from ._diagnose import VERDICTS, Diagnosis, build_case, diagnose
 from ._locate import Mismatch, gather, locate
-from ._manifest import KINDS, Manifest, Recording, load_manifest, read_recording
+from ._manifest import (
+    DIAGNOSABLE_TOOLPATHS,
+    KINDS,
+    Manifest,
+    Recording,
+    load_manifest,
+    read_recording,
+    simulation_manifest,
+)
+from ._report import (
+    figure_data,
+    fitted_effects_toml,
+    fitted_machine_toml,
+    write_figures,
+)
 from ._sim import CaseModel
 from .effects import (
     CATALOGUE,
@@ -38,10 +52,16 @@ __all__ = [
     "Mismatch",
     "gather",
     "locate",
+    "DIAGNOSABLE_TOOLPATHS",
     "KINDS",
     "Manifest",
     "Recording",
     "load_manifest",
     "read_recording",
+    "simulation_manifest",
+    "figure_data",
+    "fitted_effects_toml",
+    "fitted_machine_toml",
+    "write_figures",
     "CaseModel",
 ]

@@ -410,11 +410,11 @@ def diagnose(
     man = manifest if isinstance(manifest, Manifest) else load_manifest(manifest)
     import warnings
 
-    from ._threads import single_blas_thread
+    from .._defaults import blas_threads
 
     # exploratory fits visit diverging loops and far tails of distributions: their
     # floating-point warnings are expected and handled (finite penalties)
-    with single_blas_thread(), np.errstate(all="ignore"), warnings.catch_warnings():
+    with blas_threads(), np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return _diagnose(man, progress=progress, effects=effects, max_terms=max_terms)
 

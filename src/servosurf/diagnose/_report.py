@@ -1,8 +1,10 @@
-"""Pictures and files of a diagnosis: before/after residuals, FRFs, maps.
+"""Files of a diagnosis and the data of its pictures: before/after residuals, FRFs,
+maps.
 
 Every picture shows the recording against the nominal model ("before") and the
 fitted model ("after") and marks the located mismatch (bands, lines, time windows).
-Display units (nm, ms, kHz, degree) are used here only.
+This module gathers that data in SI units (:func:`figure_data`);
+:func:`servosurf.viz.diagnosis_figures` draws it.
 """
 
 from __future__ import annotations
@@ -25,26 +27,28 @@ from ._blocks import (
 from ._locate import third_octaves
 from .effects import Model
 
-__all__ = ["figures", "fitted_machine_toml", "fitted_effects_toml"]
+__all__ = ["figure_data", "fitted_effects_toml", "fitted_machine_toml", "write_figures"]
 
 
 def _safe(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
-def _marks(ax, mism, rec, *, scale=1.0, time=False):
+def _marks(mism, rec: str) -> list[dict]:
+    """The located mismatches of one recording, as figure marks (SI units).
+
+    Each mark holds the keys of a mismatch's details the figures draw: ``t_s``
+    (time window, s), ``band_hz`` (frequency band, Hz), ``frequency_hz`` (a line).
+    """
+    keys = ("t_s", "band_hz", "frequency_hz")
+    out = []
     for m in mism:
         if m.recording != rec:
             continue
-        d = m.details
-        if time and "t_s" in d:
-            ax.axvspan(d["t_s"][0] * scale, d["t_s"][1] * scale, color="C3", alpha=0.15)
-        elif not time and "band_hz" in d:
-            ax.axvspan(
-                d["band_hz"][0] * scale, d["band_hz"][1] * scale, color="C3", alpha=0.12
-            )
-        elif not time and "frequency_hz" in d:
-            ax.axvline(d["frequency_hz"] * scale, color="C3", lw=0.8, ls=":")
+        mark = {k: m.details[k] for k in keys if k in m.details}
+        if mark:
+            out.append(mark)
+    return out
 
 
 def _bands(freq, val):
@@ -58,156 +62,132 @@ def _bands(freq, val):
     return fc[ok], s[ok] / cnt[ok]
 
 
-def _spectrum(b: SpectralBlock, d, path: Path) -> Path:
-    from ..viz._common import figure, save
-
-    fig, ax = figure(figsize=(8, 4.5))
-    ax.loglog(b.freq, b.pbar, color="0.75", lw=0.6, label="measured (averaged)")
-    for p, lab, st in (
-        (Model(), "model before", "C0--"),
-        (d.model, "after", "C3-"),
-    ):
-        ax.loglog(b.freq, b.expected(p), st, lw=1.2, label=lab)
-    _marks(ax, d.mismatches, b.recording)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("following-error PSD [m^2/Hz]")
-    ax.set_title(f"{b.recording}: idle following-error spectrum ({b.nrec} records)")
-    ax.legend(fontsize=8)
-    return save(fig, path)
+def _spectrum(b: SpectralBlock, d) -> dict:
+    return {
+        "kind": "spectrum",
+        "recording": b.recording,
+        "records": int(b.nrec),
+        "frequency_hz": b.freq,
+        "measured_m2_per_hz": b.pbar,
+        "before_m2_per_hz": b.expected(Model()),
+        "after_m2_per_hz": b.expected(d.model),
+        "marks": _marks(d.mismatches, b.recording),
+    }
 
 
-def _timeseries(b: TimeBlock, d, force: ForceBlock | None, path: Path) -> Path:
-    from ..viz._common import figure, save
-
-    rows = 3 if force is not None else 2
-    fig, ax = figure(rows, 1, figsize=(9, 2.6 * rows))
+def _timeseries(b: TimeBlock, d, force: ForceBlock | None) -> dict:
     n = b.records[0]["fe"].size
-    t = (b.records[0].get("t0", 0.0) + np.arange(n) / b.fs) * 1e3
+    t = b.records[0].get("t0", 0.0) + np.arange(n) / b.fs
     if isinstance(b, CutBlock):
-        t = (b.k0 + np.arange(n)) / b.fs * 1e3
-    for p, lab, c in ((Model(), "before", "C0"), (d.model, "after", "C3")):
-        r = b.residual_time(p, 0)
-        ax[0].plot(t, r * 1e9, color=c, lw=0.5, label=f"residual {lab}")
-        _, w, f = b.meta[0]
-        x = b.whitened(p, 0)
-        fc, e = _bands(f, np.abs(x) ** 2)
-        ax[1].semilogx(
-            fc,
-            e,
-            "o-" if lab == "after" else "s--",
-            color=c,
-            ms=3,
-            label=f"whitened power {lab}",
-        )
+        t = (b.k0 + np.arange(n)) / b.fs
+    out = {
+        "kind": "residual",
+        "recording": b.recording,
+        "time_s": t,
+        "marks": _marks(d.mismatches, b.recording),
+    }
+    for p, lab in ((Model(), "before"), (d.model, "after")):
+        out[f"residual_{lab}_m"] = b.residual_time(p, 0)
+        _, _w, f = b.meta[0]
+        fc, e = _bands(f, np.abs(b.whitened(p, 0)) ** 2)
+        out[f"band_centre_{lab}_hz"] = fc
+        out[f"whitened_power_{lab}"] = e
         if force is not None:
-            ax[2].plot(
-                t,
-                (force.force - force.cut.predict(p)["force"]) * 1e3,
-                color=c,
-                lw=0.5,
-                label=f"force residual {lab}",
-            )
-    ax[1].axhline(2.0, color="0.5", lw=0.8, ls=":")
-    _marks(ax[0], d.mismatches, b.recording, scale=1e3, time=True)
-    _marks(ax[1], d.mismatches, b.recording)
-    ax[0].set_ylabel("fe residual [nm]")
-    ax[0].set_xlabel("time [ms]")
-    ax[1].set_ylabel("|whitened|^2 per bin\n(noise: 2)")
-    ax[1].set_xlabel("frequency [Hz]")
-    if force is not None:
-        ax[2].set_ylabel("force residual [mN]")
-        ax[2].set_xlabel("time [ms]")
-        ax[2].legend(fontsize=8)
-    ax[0].legend(fontsize=8)
-    ax[1].legend(fontsize=8)
-    ax[0].set_title(f"{b.recording}: measured minus simulated following error")
-    return save(fig, path)
+            out[f"force_residual_{lab}_n"] = (
+                force.force - force.cut.predict(p)["force"])
+    return out
 
 
-def _frf(b: FRFBlock, d, path: Path) -> Path:
-    from ..viz._common import figure, save
-
-    fig, ax = figure(2, 1, figsize=(8, 6), sharex=True)
-    ax[0].loglog(b.freq, np.abs(b.frf), "k.", ms=2, label="measured")
-    ax[1].semilogx(b.freq, np.degrees(np.angle(b.frf)), "k.", ms=2)
-    for p, lab, st in ((Model(), "before", "C0--"), (d.model, "after", "C3-")):
-        h = b.model(p) * (b.gain_offset(p) if b.gain else 1.0)
-        ax[0].loglog(b.freq, np.abs(h), st, lw=1.1, label=lab)
-        ax[1].semilogx(b.freq, np.degrees(np.angle(h)), st, lw=1.1)
-    for a in ax:
-        _marks(a, d.mismatches, b.recording)
-    ax[0].set_ylabel("magnitude")
-    ax[1].set_ylabel("phase [deg]")
-    ax[1].set_xlabel("frequency [Hz]")
-    ax[0].legend(fontsize=8)
-    ax[0].set_title(f"{b.recording} ({b.kind})")
-    return save(fig, path)
+def _frf(b: FRFBlock, d) -> dict:
+    out = {
+        "kind": "frf",
+        "recording": b.recording,
+        "frf_kind": b.kind,
+        "frequency_hz": b.freq,
+        "measured": b.frf,
+        "marks": _marks(d.mismatches, b.recording),
+    }
+    for p, lab in ((Model(), "before"), (d.model, "after")):
+        out[lab] = b.model(p) * (b.gain_offset(p) if b.gain else 1.0)
+    return out
 
 
-def _points(b: PointsBlock, d, path: Path, nominal: PointsBlock | None) -> Path:
-    from ..viz._common import figure, save
-
-    before = (nominal or b).nuisance_fit(Model())
+def _points(b: PointsBlock, d, nominal: PointsBlock | None) -> dict:
+    s_nom = nominal or b
+    before = s_nom.nuisance_fit(Model())
     after = b.nuisance_fit(d.model)
     if b.kind == "surface" and b.grid is not None:
         shape, flat = b.grid
-        fig, ax = figure(1, 2, figsize=(11, 4.5))
-        keep_nom = (nominal or b).keep
-        for a, vals, keep, lab in (
-            (ax[0], before, keep_nom, "before"),
-            (ax[1], after, b.keep, "after"),
-        ):
+        out = {"kind": "map", "recording": b.recording}
+        for vals, keep, lab in ((before, s_nom.keep, "before"),
+                                (after, b.keep, "after")):
             img = np.full(shape[0] * shape[1], np.nan)
-            img[flat[keep]] = vals * 1e9
-            lim = np.nanpercentile(np.abs(img), 99) or 1.0
-            im = a.imshow(
-                img.reshape(shape), cmap="RdBu_r", vmin=-lim, vmax=lim, origin="upper"
-            )
-            a.set_title(f"{b.recording}: residual {lab} [nm]")
-            fig.colorbar(im, ax=a, shrink=0.8)
-        return save(fig, path)
-    fig, ax = figure(figsize=(9, 3.5))
-    s_nom = nominal or b
-    for vals, blk, lab, c in (
-        (before, s_nom, "before", "C0"),
-        (after, b, "after", "C3"),
-    ):
+            img[flat[keep]] = vals
+            out[f"residual_{lab}_m"] = img.reshape(shape)
+        return out
+    out = {"kind": "profile", "recording": b.recording}
+    for vals, blk, lab in ((before, s_nom, "before"), (after, b, "after")):
         pos = blk.along[blk.keep] if blk.along is not None else np.arange(vals.size)
-        ax.plot(pos * 1e3, vals * 1e9, ".", ms=1, color=c, label=lab)
-    ax.set_xlabel("position along the profile [mm]")
-    ax.set_ylabel("residual [nm]")
-    ax.legend(fontsize=8, markerscale=6)
-    ax.set_title(f"{b.recording}: measured minus model")
-    return save(fig, path)
+        out[f"position_{lab}_m"] = pos
+        out[f"residual_{lab}_m"] = vals
+    return out
 
 
-def figures(d, out: Path) -> dict[str, Path]:
+def figure_data(d) -> dict[str, dict]:
+    """The data of the before/after pictures of a :class:`Diagnosis`.
+
+    "Before" is the nominal model, "after" the fitted one; every array is in SI
+    units (m, s, Hz, N; spectra in m^2/Hz) and
+    :func:`servosurf.viz.diagnosis_figures` draws them.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        A finished diagnosis.
+
+    Returns
+    -------
+    dict of str to dict
+        Picture name (a file stem) -> its data: ``kind`` (``spectrum``,
+        ``residual``, ``frf``, ``map`` or ``profile``), ``recording``, ``marks``
+        (located mismatches: ``t_s``, ``band_hz`` or ``frequency_hz``) and the
+        curves of that kind.
+    """
+    res: dict[str, dict] = {}
+    nominal = {id(b): n for b, n in zip(d.blocks, d.blocks_nominal, strict=True)}
+    forces = {b.cut.recording: b for b in d.blocks if isinstance(b, ForceBlock)}
+    for b in d.blocks:
+        name = _safe(b.recording)
+        if isinstance(b, SpectralBlock):
+            res[f"{name}_spectrum"] = _spectrum(b, d)
+        elif isinstance(b, TimeBlock):
+            res[f"{name}_residual"] = _timeseries(b, d, forces.get(b.recording))
+        elif isinstance(b, FRFBlock):
+            res[f"{name}_frf"] = _frf(b, d)
+        elif isinstance(b, PointsBlock):
+            key = f"{name}_{'map' if b.kind == 'surface' else 'profile'}"
+            res[key] = _points(b, d, nominal.get(id(b)))
+    return res
+
+
+def write_figures(d, out: str | Path) -> dict[str, Path]:
     """Write the before/after pictures of a :class:`Diagnosis` into ``out``.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        A finished diagnosis.
+    out : str or Path
+        Existing output directory.
 
     Returns
     -------
     dict of str to Path
         Picture name -> PNG file.
     """
-    out = Path(out)
-    res: dict[str, Path] = {}
-    nominal = {id(b): n for b, n in zip(d.blocks, d.blocks_nominal, strict=True)}
-    forces = {b.cut.recording: b for b in d.blocks if isinstance(b, ForceBlock)}
-    for b in d.blocks:
-        name = _safe(b.recording)
-        if isinstance(b, SpectralBlock):
-            res[f"{name}_spectrum"] = _spectrum(b, d, out / f"{name}_spectrum.png")
-        elif isinstance(b, TimeBlock):
-            res[f"{name}_residual"] = _timeseries(
-                b, d, forces.get(b.recording), out / f"{name}_residual.png"
-            )
-        elif isinstance(b, FRFBlock):
-            res[f"{name}_frf"] = _frf(b, d, out / f"{name}_frf.png")
-        elif isinstance(b, PointsBlock):
-            key = f"{name}_{'map' if b.kind == 'surface' else 'profile'}"
-            n = nominal.get(id(b))
-            res[key] = _points(b, d, out / f"{key}.png", n)
-    return res
+    from ..viz import diagnosis_figures
+
+    return diagnosis_figures(figure_data(d), out)
 
 
 def fitted_machine_toml(d) -> str:

@@ -30,6 +30,7 @@ _LAZY = {
     "plot_deviation": "._simulation_plots",
     "plot_realisations": "._simulation_plots",
     "plot_map_comparison": "._simulation_plots",
+    "diagnosis_figures": "._diagnosis_plots",
 }
 
 __all__ = sorted(_LAZY)
