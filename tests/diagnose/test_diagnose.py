@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -515,36 +514,3 @@ def test_force_excess_test_is_calibrated_with_an_estimated_sigma():
     sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
     slow = 0.4 * np.sin(np.linspace(0, 20 * np.pi, x.size))  # smooth misfit
     assert force_excess_logsf((x + slow) / sig) < -4
-
-
-# ------------------------------------------------------------------ CSV variants
-def _write_fe(path: Path, t: np.ndarray, fmt: str, bom: bool = False) -> Path:
-    rng = np.random.default_rng(11)
-    fe = 1e-9 * rng.standard_normal(t.size)
-    body = "\n".join(f"{a:{fmt}},{b:.6g}" for a, b in zip(t, fe, strict=True))
-    text = "time_s,following_error_m\n" + body + "\n"
-    path.write_bytes((b"\xef\xbb\xbf" if bom else b"") + text.encode())
-    return path
-
-
-def test_csv_times_printed_with_six_digits_and_a_bom_are_read():
-    # an independent exporter: Excel-style BOM, times as %.6g (at 0.16 s the
-    # rounding is 1e-7 s, 2 % of the 5 us step)
-    from servosurf.diagnose._manifest import _read_following
-
-    fs = 199.6e3
-    t = np.arange(32768) / fs
-    with tempfile.TemporaryDirectory() as d:
-        rec = _read_following(_write_fe(Path(d) / "fe.csv", t, ".6g", bom=True))
-    assert len(rec["records"]) == 1 and rec["records"][0]["fe"].size == t.size
-    assert rec["fs"] == pytest.approx(fs, rel=1e-6, abs=0.0)
-
-
-def test_csv_with_a_missing_sample_is_a_user_error():
-    from servosurf.config import ConfigError
-    from servosurf.diagnose._manifest import _read_following
-
-    t = np.delete(np.arange(4096) / 199.6e3, 2000)
-    with tempfile.TemporaryDirectory() as d:
-        with pytest.raises(ConfigError, match="uniformly sampled"):
-            _read_following(_write_fe(Path(d) / "fe.csv", t, ".9g"))

@@ -39,12 +39,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
 
     from .._progress import stage
+    from ..io import read_frf_csv
     from ..servo import (
         DEFAULT_IDENT_PARAMS,
         identify,
         load_machine,
         open_loop_frf,
-        read_frf_csv,
     )
     from ..viz import plot_frf_fit
     from ._common import atomic_write, output_folder, print_json, write_json

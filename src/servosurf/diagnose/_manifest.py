@@ -54,16 +54,14 @@ not know). The record is assumed anti-aliased.
 
 from __future__ import annotations
 
-import csv
 import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..errors import ConfigError
+from ..io import RECORDING_KINDS, read_recording
 
 __all__ = [
     "DIAGNOSABLE_TOOLPATHS",
@@ -79,16 +77,8 @@ __all__ = [
 #: and an NC program are simulated, not yet diagnosed).
 DIAGNOSABLE_TOOLPATHS = ("lenslet", "facing")
 
-#: Recording kinds accepted in a manifest.
-KINDS = (
-    "following-error",
-    "frf-open-loop",
-    "frf-closed-loop",
-    "frf-force",
-    "cut",
-    "surface",
-    "profile",
-)
+#: Recording kinds accepted in a manifest (:data:`servosurf.io.RECORDING_KINDS`).
+KINDS = RECORDING_KINDS
 
 _CASE_KEYS = {
     "machine",
@@ -138,7 +128,7 @@ class Recording:
         The file.
     data : dict
         Arrays in SI units; the keys depend on the kind (see
-        :func:`read_recording`).
+        :func:`servosurf.io.read_recording`).
     options : dict
         Extra manifest keys (geometry of a profile, origin of a map).
     """
@@ -392,253 +382,6 @@ def load_manifest(path: str | Path) -> Manifest:
         specific_force=kt,
         recordings=tuple(out),
     )
-
-
-# ---------------------------------------------------------------- readers
-def _read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...]):
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:  # BOM-tolerant
-            rows = [
-                r for r in csv.reader(ln for ln in fh if not ln.startswith("#")) if r
-            ]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read CSV: {exc}") from None
-    if not rows:
-        raise ConfigError(f"{path}: empty file")
-    header = [c.strip().lower() for c in rows[0]]
-    missing = [c for c in required if c not in header]
-    if missing:
-        raise ConfigError(
-            f"{path}: bad CSV header {','.join(header)!r}: expected "
-            f"columns {','.join(required)}"
-            + (f" (optional {','.join(optional)})" if optional else "")
-        )
-    cols = {c: header.index(c) for c in (*required, *optional) if c in header}
-    try:
-        arr = np.array(
-            [[float(r[i]) for i in cols.values()] for r in rows[1:]], dtype=float
-        )
-    except (ValueError, IndexError):
-        raise ConfigError(
-            f"{path}: every row must hold numbers in the columns {','.join(cols)}"
-        ) from None
-    if arr.ndim != 2 or arr.shape[0] < 8:
-        raise ConfigError(f"{path}: need at least 8 rows of data")
-    if not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{path}: non-finite values")
-    return {c: arr[:, j] for j, c in enumerate(cols)}
-
-
-def _fs_from_time(t: np.ndarray, path: Path) -> float:
-    """Sampling rate (Hz) of a record's time column (s).
-
-    The step is the least-squares slope of time against sample number, and every
-    time must lie within a quarter step of that uniform grid: times printed with a few
-    significant digits (``%.6g`` puts 1e-5 s of rounding on a 1e-4 s step) are
-    accepted, a missing or repeated sample is not.
-    """
-    dt = np.diff(t)
-    if dt.size == 0 or not np.all(dt > 0):
-        raise ConfigError(f"{path}: time_s must increase within a record")
-    k = np.arange(t.size) - 0.5 * (t.size - 1)
-    step = float(k @ (t - t.mean())) / float(k @ k)  # least-squares step
-    off = t - (t.mean() + step * k)
-    if np.max(np.abs(off)) > 0.25 * step:
-        i = int(np.argmax(np.abs(off)))
-        raise ConfigError(
-            f"{path}: time_s must be uniformly sampled (sample {i} at "
-            f"{t[i]!r} s is {off[i] / step:+.2f} steps off the grid of "
-            f"{step:.6g} s)"
-        )
-    return 1.0 / step
-
-
-def _load_npz(path: Path) -> dict:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: cannot read NPZ: {exc}") from None
-
-
-def _read_following(path: Path) -> dict:
-    if path.suffix.lower() == ".npz":
-        z = _load_npz(path)
-        if "following_error_m" not in z:
-            raise ConfigError(f"{path}: NPZ needs 'following_error_m' (and fs_hz)")
-        fe = np.atleast_2d(np.asarray(z["following_error_m"], dtype=float))
-        if "fs_hz" in z:
-            fs = float(np.asarray(z["fs_hz"]).ravel()[0])
-        elif "time_s" in z:
-            fs = _fs_from_time(np.atleast_2d(z["time_s"])[0], path)
-        else:
-            raise ConfigError(f"{path}: NPZ needs 'fs_hz' or 'time_s'")
-        t0 = np.zeros(fe.shape[0])
-        if "time_s" in z:
-            t0 = np.atleast_2d(np.asarray(z["time_s"], dtype=float))[:, 0]
-            if t0.size != fe.shape[0]:
-                t0 = np.zeros(fe.shape[0])
-        recs = []
-        for i in range(fe.shape[0]):
-            rec = {"fe": fe[i], "t0": float(t0[i])}
-            for key, name in (("command_m", "command"), ("force_n", "force")):
-                if key in z:
-                    a = np.atleast_2d(np.asarray(z[key], dtype=float))
-                    if a.shape != fe.shape:
-                        raise ConfigError(
-                            f"{path}: {key} shape {a.shape} differs from "
-                            f"following_error_m {fe.shape}"
-                        )
-                    rec[name] = a[i]
-            recs.append(rec)
-    else:
-        cols = _read_csv(
-            path, ("time_s", "following_error_m"), ("command_m", "force_n", "record")
-        )
-        t = cols["time_s"]
-        brk = np.nonzero(np.diff(t) <= 0)[0] + 1
-        if "record" in cols:
-            brk = np.union1d(brk, np.nonzero(np.diff(cols["record"]) != 0)[0] + 1)
-        bounds = np.concatenate([[0], brk, [t.size]]).astype(int)
-        recs, fss = [], []
-        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-            if b - a < 8:
-                raise ConfigError(f"{path}: a record has fewer than 8 samples")
-            fss.append(_fs_from_time(t[a:b], path))
-            rec = {"fe": cols["following_error_m"][a:b], "t0": float(t[a])}
-            if "command_m" in cols:
-                rec["command"] = cols["command_m"][a:b]
-            if "force_n" in cols:
-                rec["force"] = cols["force_n"][a:b]
-            recs.append(rec)
-        fs = float(np.median(fss))
-    if not (np.isfinite(fs) and fs > 0):
-        raise ConfigError(f"{path}: sampling rate must be positive, got {fs!r}")
-    for rec in recs:
-        if not np.all(np.isfinite(rec["fe"])):
-            raise ConfigError(f"{path}: following_error_m has non-finite values")
-    return {"fs": fs, "records": recs}
-
-
-def _read_cut(path: Path) -> dict:
-    if path.suffix.lower() == ".npz":
-        z = _load_npz(path)
-        need = ("time_s", "force_n", "following_error_m")
-        if not all(k in z for k in need):
-            raise ConfigError(f"{path}: NPZ needs {', '.join(need)}")
-        cols = {k: np.asarray(z[k], dtype=float).ravel() for k in need}
-    else:
-        cols = _read_csv(path, ("time_s", "force_n", "following_error_m"), ())
-    fs = _fs_from_time(cols["time_s"], path)
-    return {
-        "fs": fs,
-        "t": cols["time_s"],
-        "force": cols["force_n"],
-        "fe": cols["following_error_m"],
-    }
-
-
-def _read_frf(path: Path) -> dict:
-    from ..servo import read_frf_csv
-
-    f, h = read_frf_csv(path)
-    if np.any(h == 0):
-        raise ConfigError(f"{path}: FRF values must be non-zero")
-    return {"freq": f, "frf": h}
-
-
-def _read_surface(path: Path) -> dict:
-    if path.suffix.lower() == ".npz":
-        z = _load_npz(path)
-        if not all(k in z for k in ("z", "dx", "dy")):
-            raise ConfigError(f"{path}: surface NPZ needs z, dx, dy (m)")
-        zz = np.asarray(z["z"], dtype=float)
-        out = {
-            "z": zz,
-            "dx": float(np.ravel(z["dx"])[0]),
-            "dy": float(np.ravel(z["dy"])[0]),
-        }
-        for k in ("x0", "y0"):
-            if k in z:
-                out[k] = float(np.ravel(z[k])[0])
-    else:
-        from ..io import read_surface
-
-        s = read_surface(path)
-        if s.dx is None or s.dy is None:
-            raise ConfigError(f"{path}: the surface has no lateral calibration")
-        out = {"z": np.asarray(s.z, dtype=float), "dx": s.dx, "dy": s.dy}
-    if out["z"].ndim != 2 or min(out["z"].shape) < 4:
-        raise ConfigError(f"{path}: z must be a 2-D map, got shape {out['z'].shape}")
-    if not (out["dx"] > 0 and out["dy"] > 0):
-        raise ConfigError(f"{path}: dx and dy must be positive pixel sizes in m")
-    if np.isfinite(out["z"]).sum() < 16:
-        raise ConfigError(f"{path}: fewer than 16 valid pixels")
-    return out
-
-
-def _read_profile(path: Path) -> dict:
-    if path.suffix.lower() == ".npz":
-        z = _load_npz(path)
-        if not all(k in z for k in ("z", "dx")):
-            raise ConfigError(f"{path}: profile NPZ needs z and dx (m)")
-        out = {
-            "z": np.asarray(z["z"], dtype=float).ravel(),
-            "dx": float(np.ravel(z["dx"])[0]),
-        }
-        if "x0" in z:
-            out["x0"] = float(np.ravel(z["x0"])[0])
-    else:
-        try:
-            from ..io import read_profile  # written by another engineer
-        except ImportError:
-            raise ConfigError(
-                f"{path}: only .npz profiles (z, dx) can be read here "
-                "(servosurf.io.read_profile is unavailable)"
-            ) from None
-        p = read_profile(path)
-        out = {"z": np.asarray(p.z, dtype=float), "dx": float(p.dx), "x0": float(p.x0)}
-    if out["z"].size < 8 or not out["dx"] > 0:
-        raise ConfigError(f"{path}: a profile needs >= 8 samples and dx > 0 m")
-    return out
-
-
-def read_recording(path: str | Path, kind: str) -> dict:
-    """Read one recording file of a given kind.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file.
-    kind : str
-        One of :data:`KINDS`.
-
-    Returns
-    -------
-    dict
-        ``following-error``: ``fs`` (Hz), ``records`` (list of dicts with ``fe``,
-        optional ``command``, ``force``; m, m, N); ``frf-*``: ``freq`` (Hz),
-        ``frf`` (complex); ``cut``: ``fs``, ``t`` (s), ``force`` (N), ``fe`` (m);
-        ``surface``: ``z`` (m, NaN invalid), ``dx``, ``dy`` (m), optional ``x0``,
-        ``y0``; ``profile``: ``z``, ``dx``, optional ``x0`` (m).
-
-    Raises
-    ------
-    ConfigError
-        When the file cannot be read or has the wrong layout.
-    """
-    path = Path(path)
-    if kind == "following-error":
-        return _read_following(path)
-    if kind.startswith("frf-"):
-        return _read_frf(path)
-    if kind == "cut":
-        return _read_cut(path)
-    if kind == "surface":
-        return _read_surface(path)
-    if kind == "profile":
-        return _read_profile(path)
-    raise ConfigError(f"unknown recording kind {kind!r} (kinds: {', '.join(KINDS)})")
 
 
 def simulation_manifest(

@@ -24,6 +24,11 @@ software, never a ZYGO instrument.
 MetroPro ``.dat`` and Formtracer ``.dat`` share a suffix and are told apart by
 content (binary magic number against a text unit line).
 
+Recordings of a machine (following error, FRFs, cuts; maps and profiles as NPZ or
+any format above): :func:`read_recording` of a kind in :data:`RECORDING_KINDS`;
+FRFs as ``frequency_hz,real,imag`` CSV with :func:`read_frf_csv` /
+:func:`write_frf_csv`.
+
 All heights and pixel sizes are in metres; invalid pixels are NaN; row 0 is the top
 of the map as the instrument shows it.
 """
@@ -38,6 +43,7 @@ from . import _datx, _metropro_dat, _mx_profile_csv, _npz, _x3p, _zygo_ascii, _z
 # recognises falls back on the first reader of its suffix, the binary format.
 from . import _formtracer  # noqa: F401
 from ._common import decode_text, load_source
+from ._recordings import RECORDING_KINDS, read_frf_csv, read_recording, write_frf_csv
 from ._registry import (
     FormatInfo,
     encode_surface,
@@ -58,4 +64,8 @@ __all__ = [
     "read_profile",
     "read_surface",
     "write_surface",
+    "RECORDING_KINDS",
+    "read_frf_csv",
+    "read_recording",
+    "write_frf_csv",
 ]

@@ -1,5 +1,6 @@
 """Mechatronic model of the FTS: plant (Eqs 1-7), PIDF, tuning, closed loop."""
 
+from ..io import read_frf_csv, write_frf_csv  # the FRF file format, re-exported
 from ._axis import AXIS_MODELS, AxisModel
 from ._ident import (
     DEFAULT_IDENT_PARAMS,
@@ -8,9 +9,7 @@ from ._ident import (
     get_param,
     identify,
     open_loop_frf,
-    read_frf_csv,
     set_param,
-    write_frf_csv,
 )
 from ._loop import PATHS, PIDF, LoopFRF, ServoLoop, double_pole, tune_pidf
 from ._machine import (

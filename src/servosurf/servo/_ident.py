@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import io
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import scipy as sp
@@ -16,8 +13,6 @@ from ._loop import loop_elements, plant_gain
 from ._machine import Machine
 
 __all__ = [
-    "read_frf_csv",
-    "write_frf_csv",
     "fit_percent",
     "open_loop_frf",
     "identify",
@@ -37,60 +32,6 @@ DEFAULT_IDENT_PARAMS = (
     "mechanics.k2",
     "mechanics.c2",
 )
-
-
-def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.ndarray]:
-    """Read an FRF from CSV with header ``frequency_hz,real,imag``.
-
-    A UTF-8 byte-order mark is tolerated and a row at 0 Hz (DC, where a measured
-    FRF carries no phase information and the models' logs are undefined) is
-    dropped; other frequencies must be positive and increasing.
-
-    Returns
-    -------
-    freq : ndarray
-        Frequencies in Hz (positive, increasing).
-    frf : ndarray of complex
-        The response (SI units of output per input).
-    """
-    name = str(source) if isinstance(source, str | Path) else "<buffer>"
-    try:
-        fh = (open(source, newline="", encoding="utf-8-sig")
-              if isinstance(source, str | Path) else source)
-    except OSError as exc:
-        raise ConfigError(f"{name}: cannot open FRF file: {exc.strerror}") from None
-    with fh:
-        rows = list(csv.reader(line for line in fh if not line.startswith("#")))
-    if not rows or [c.strip().lower() for c in rows[0][:3]] != [
-        "frequency_hz",
-        "real",
-        "imag",
-    ]:
-        raise ConfigError(f"{name}: expected a header 'frequency_hz,real,imag'")
-    try:
-        data = np.array([[float(v) for v in r[:3]] for r in rows[1:] if r], dtype=float)
-    except ValueError:
-        raise ConfigError(f"{name}: every row must hold three numbers") from None
-    if data.ndim != 2 or data.shape[0] < 3 or data.shape[1] != 3:
-        raise ConfigError(f"{name}: need at least 3 rows of three numbers")
-    if data.shape[0] > 3 and data[0, 0] == 0.0:
-        data = data[1:]  # DC row
-    f = data[:, 0]
-    if not (np.all(np.isfinite(data)) and f[0] > 0 and np.all(np.diff(f) > 0)):
-        raise ConfigError(
-            f"{name}: frequencies must be positive, finite and increasing"
-        )
-    return f, data[:, 1] + 1j * data[:, 2]
-
-
-def write_frf_csv(path: str | Path, freq: np.ndarray, frf: np.ndarray) -> None:
-    """Write ``frequency_hz,real,imag`` CSV atomically."""
-    from .._atomic import atomic_write
-
-    lines = ["frequency_hz,real,imag"] + [
-        f"{f:.10g},{h.real:.10g},{h.imag:.10g}" for f, h in zip(freq, frf, strict=True)
-    ]
-    atomic_write(path, lambda p: p.write_text("\n".join(lines) + "\n"))
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> float:
