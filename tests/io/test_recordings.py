@@ -109,8 +109,9 @@ def test_bad_header_names_the_file_and_the_columns(tmp_path):
 def test_cut_csv(tmp_path):
     t = np.arange(50) / 1e4
     p = tmp_path / "cut.csv"
+    rows = (f"{a!r},{a * 2e-6!r},{a * 3!r}" for a in t.tolist())
     p.write_text("# a comment\nTime_s, following_error_m ,force_n\n"
-                 + "\n".join(f"{a!r},{a * 2e-6!r},{a * 3!r}" for a in t.tolist()) + "\n")
+                 + "\n".join(rows) + "\n")
     out = read_recording(p, "cut")
     assert out["fs"] == pytest.approx(1e4)
     np.testing.assert_array_equal(out["t"], t)
