@@ -152,16 +152,14 @@ def _mean(d: dict) -> float:
 
 def build_case(man: Manifest) -> CaseModel:
     """The nominal :class:`CaseModel` of a manifest."""
-    from ..servo import load_machine
+    from ..run import RunConfig
     from ..toolpath import load_toolpath
 
-    m = load_machine(man.machine)
-    if man.disturbances:
-        m = m.with_disturbances(man.disturbances)
-    if man.moving_mass is not None:
-        m = m.with_moving_mass(man.moving_mass)
-    if man.bandwidth is not None:
-        m = m.with_bandwidth(man.bandwidth)
+    run = man.run
+    if run is None:  # a Manifest built in Python
+        run = RunConfig(machine=str(man.machine), bandwidth=man.bandwidth,
+                        mass=man.moving_mass, disturbances=man.disturbances or None)
+    m = run.machine_model()
     tp = load_toolpath(man.toolpath) if man.toolpath is not None else None
     from ..errors import ModelError
 

@@ -15,9 +15,18 @@ A manifest is a TOML file::
     path = "idle.npz"
     kind = "following-error"
 
-The ``[case]`` keys may also sit at the top level and ``[[recordings]]`` is
-accepted for ``[[recording]]``. Paths are relative to the manifest. Kinds and
-formats:
+The ``[case]`` keys (:class:`CaseTable`; ``preset = "<name>"`` starts from a run
+preset of :mod:`servosurf.run`) may also sit at the top level and
+``[[recordings]]`` is accepted for ``[[recording]]`` (:class:`RecordingTable`).
+Both tables are read with :func:`servosurf.config.from_mapping`: unknown keys are
+refused with a suggestion, numbers are range-checked in their units.
+
+Relative paths (machine, toolpath, workpiece, recordings) are relative to the
+manifest's folder only. (Before, a toolpath or workpiece not found there was also
+looked up in ``toolpaths/`` and ``workpieces/`` of the current directory; that
+fallback is gone: a manifest means the same wherever it is run from.) A name that
+is no file is looked up among the built-in machines, toolpaths and workpieces.
+Kinds and formats (:func:`servosurf.io.read_recording` reads them):
 
 ``following-error``
     CSV ``time_s,following_error_m`` with optional ``command_m``, ``force_n`` and
@@ -54,18 +63,21 @@ not know). The record is assumed anti-aliased.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..config import from_mapping, param
 from ..errors import ConfigError
 from ..io import RECORDING_KINDS, read_recording
 
 __all__ = [
     "DIAGNOSABLE_TOOLPATHS",
     "KINDS",
+    "CaseTable",
+    "RecordingTable",
     "Manifest",
     "Recording",
     "load_manifest",
@@ -80,17 +92,69 @@ DIAGNOSABLE_TOOLPATHS = ("lenslet", "facing")
 #: Recording kinds accepted in a manifest (:data:`servosurf.io.RECORDING_KINDS`).
 KINDS = RECORDING_KINDS
 
-_CASE_KEYS = {
-    "machine",
-    "toolpath",
-    "bandwidth",
-    "moving-mass",
-    "disturbances",
-    "specific-cutting-force",
-    "workpiece",
-    "name",
-    "description",
-}
+
+@dataclass(frozen=True)
+class CaseTable:
+    """The ``[case]`` table of a manifest, as written (SI units; paths unresolved).
+
+    Keys are the fields in kebab-case (``moving-mass``); ``mass``,
+    ``bandwidth-hz``, ``moving-mass-kg`` and the snake_case spellings are accepted
+    as aliases.
+    """
+
+    machine: str = param("seed-prototype",
+                         doc="built-in machine name or machine TOML path")
+    toolpath: str | None = param(
+        None, doc="toolpath TOML path or built-in name (cut, surface, profile)")
+    bandwidth: float | None = param(
+        None, unit="Hz", doc="open-loop crossover bandwidth", low=0.0, low_open=True,
+        plausible=(1.0, 5e4))
+    moving_mass: float | None = param(
+        None, unit="kg", doc="moving mass m1+m2", low=0.0, low_open=True,
+        plausible=(1e-3, 50.0))
+    disturbances: str | None = param(None, doc="disturbance calibration name")
+    specific_cutting_force: float | None = param(
+        None, unit="N/m^2", doc="specific thrust pressure (overrides the workpiece's)",
+        low=0.0, low_open=True)
+    workpiece: str | None = param(
+        None, doc="workpiece TOML path or built-in name (its k_t); default NiP")
+    preset: str | None = param(
+        None, doc="run preset the case starts from (servosurf.run.PRESETS)")
+    name: str | None = param(None, doc="label of the case")
+    description: str | None = param(None, doc="free text")
+
+
+@dataclass(frozen=True)
+class RecordingTable:
+    """One ``[[recording]]`` table of a manifest, as written (SI units).
+
+    Keys are the fields in kebab-case (``angle-start``).
+    """
+
+    path: str = param(doc="the recording's file, relative to the manifest")
+    kind: str = param(doc="recording kind (servosurf.io.RECORDING_KINDS)")
+    name: str | None = param(None, doc="label (default: the file name)")
+    condition: Any = param(None, doc="free label of the recording's condition")
+    radius: float | None = param(
+        None, unit="m", doc="radius of a circular profile", low=0.0, low_open=True)
+    angle_start: float | None = param(
+        None, unit="rad", doc="start angle of a circular profile")
+    start: tuple[float, float] | None = param(
+        None, unit="m", doc="start point [x, y] of a straight profile")
+    direction: float | None = param(
+        None, unit="rad", doc="direction of a straight profile")
+    x0: float | None = param(
+        None, unit="m", doc="x of the map's pixel (0, 0) in the workpiece frame")
+    y0: float | None = param(
+        None, unit="m", doc="y of the map's pixel (0, 0) in the workpiece frame")
+    description: str | None = param(None, doc="free text")
+
+
+def _keys(cls) -> set[str]:
+    return {f.name.replace("_", "-") for f in dataclasses.fields(cls)}
+
+
+_CASE_KEYS = _keys(CaseTable)
 _ALIASES = {
     "mass": "moving-mass",
     "moving_mass": "moving-mass",
@@ -99,19 +163,7 @@ _ALIASES = {
     "moving-mass-kg": "moving-mass",
     "specific_cutting_force": "specific-cutting-force",
 }
-_REC_KEYS = {
-    "path",
-    "kind",
-    "name",
-    "condition",
-    "radius",
-    "angle-start",
-    "start",
-    "direction",
-    "x0",
-    "y0",
-    "description",
-}
+_REC_KEYS = _keys(RecordingTable)
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,6 +214,9 @@ class Manifest:
         Specific thrust pressure in N/m^2 (None: the built-in NiP workpiece's).
     recordings : tuple of Recording
         The recordings in manifest order.
+    run : RunConfig or None
+        The case as a run configuration (machine, workpiece, bandwidth, mass,
+        disturbances, preset); :func:`build_case` builds the machine from it.
     """
 
     path: Path
@@ -172,6 +227,7 @@ class Manifest:
     disturbances: str | None
     specific_force: float | None
     recordings: tuple[Recording, ...]
+    run: Any = None
 
 
 def _toolpath_kind(path: Path) -> str:
@@ -192,15 +248,83 @@ def _suggest(key: str, known) -> str:
     return f" (did you mean: {', '.join(close)}?)" if close else ""
 
 
-def _number(value: Any, name: str, where: str, *, positive: bool = True) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"{where}: {name} must be a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v) or (positive and v <= 0):
+def _resolve(base: Path, value: str) -> Path:
+    """``value`` as a path: absolute, or relative to the manifest's folder."""
+    p = Path(value)
+    return p if p.is_absolute() else base / p
+
+
+def _builtin_or_file(base: Path, value: str, what: str, builtins: dict,
+                     where: str) -> Path:
+    """A file relative to the manifest, else a built-in of that name."""
+    p = _resolve(base, value)
+    if p.is_file():
+        return p
+    tp = Path(value)
+    found = builtins.get(tp.stem if tp.suffix == ".toml" else tp.name)
+    if found is None:
         raise ConfigError(
-            f"{where}: {name} must be a positive finite number, got {v!r}"
+            f"{where}: {what} {value!r}: no such file and no built-in of that "
+            f"name ({', '.join(builtins)})"
         )
-    return v
+    return found
+
+
+def _table(cls, data: dict, where: str, prefix: str = ""):
+    """``from_mapping(cls, data)`` with the manifest named in its errors."""
+    try:
+        return from_mapping(cls, data, prefix=prefix)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+
+
+def _case_table(data: dict, path: Path) -> CaseTable:
+    """The ``[case]`` table, with top-level case keys and aliases folded in.
+
+    ``data`` is the manifest without its recordings; any other key is refused.
+    """
+    case = data.pop("case", {}) or {}
+    if not isinstance(case, dict):
+        raise ConfigError(f"{path}: [case] must be a table")
+    case = dict(case)
+    for k in list(data):
+        if k in _CASE_KEYS or k in _ALIASES:
+            case.setdefault(k, data.pop(k))
+    if data:
+        k = next(iter(data))
+        raise ConfigError(
+            f"{path}: unknown key {k!r}"
+            f"{_suggest(k, _CASE_KEYS | {'case', 'recording'})}"
+        )
+    norm = {}
+    for k, v in case.items():
+        k2 = _ALIASES.get(k, k)
+        if k2 not in _CASE_KEYS:
+            raise ConfigError(
+                f"{path}: unknown case key {k!r}{_suggest(k, _CASE_KEYS)}"
+            )
+        norm[k2] = v
+    return _table(CaseTable, norm, str(path), "case")
+
+
+def _recording_table(rec: Any, i: int, where: str) -> RecordingTable:
+    if not isinstance(rec, dict):
+        raise ConfigError(f"{where}: recording {i + 1} must be a table")
+    for k in rec:
+        if k not in _REC_KEYS:
+            raise ConfigError(
+                f"{where}: recording {i + 1}: unknown key {k!r}"
+                f"{_suggest(k, _REC_KEYS)}"
+            )
+    if "path" not in rec or "kind" not in rec:
+        raise ConfigError(f"{where}: recording {i + 1} needs 'path' and 'kind'")
+    kind = str(rec["kind"])
+    if kind not in KINDS:
+        raise ConfigError(
+            f"{where}: recording {i + 1}: unknown kind {kind!r} "
+            f"(kinds: {', '.join(KINDS)})"
+        )
+    return _table(RecordingTable, rec, f"{where}: recording {i + 1}")
 
 
 def load_manifest(path: str | Path) -> Manifest:
@@ -222,6 +346,7 @@ def load_manifest(path: str | Path) -> Manifest:
         On a missing or malformed manifest or recording (one-line message).
     """
     from ..config import load_toml
+    from ..run import RunConfig
 
     path = Path(path)
     if not path.is_file():
@@ -231,33 +356,16 @@ def load_manifest(path: str | Path) -> Manifest:
     except ConfigError as exc:
         raise ConfigError(f"manifest {exc}") from None
     base = path.parent
-    case = dict(data.pop("case", {}) or {})
+    where = str(path)
     recs = data.pop("recording", None)
     if recs is None:
         recs = data.pop("recordings", None)
-    for k in list(data):
-        if k in _CASE_KEYS or k in _ALIASES:
-            case.setdefault(k, data.pop(k))
-    if data:
-        k = next(iter(data))
-        raise ConfigError(
-            f"{path}: unknown key {k!r}"
-            f"{_suggest(k, _CASE_KEYS | {'case', 'recording'})}"
-        )
-    norm = {}
-    for k, v in case.items():
-        k2 = _ALIASES.get(k, k)
-        if k2 not in _CASE_KEYS:
-            raise ConfigError(
-                f"{path}: unknown case key {k!r}{_suggest(k, _CASE_KEYS)}"
-            )
-        norm[k2] = v
-    where = str(path)
-    machine = str(norm.get("machine", "seed-prototype"))
+    case = _case_table(data, path)
     from ..servo import builtin_machines
 
+    machine = case.machine
     if machine not in builtin_machines():
-        mp = (base / machine) if not Path(machine).is_absolute() else Path(machine)
+        mp = _resolve(base, machine)
         if not mp.is_file():
             raise ConfigError(
                 f"{where}: machine {machine!r}: no such file and no "
@@ -265,86 +373,37 @@ def load_manifest(path: str | Path) -> Manifest:
             )
         machine = str(mp)
     toolpath = None
-    if "toolpath" in norm:
-        tp = Path(str(norm["toolpath"]))
-        cands = [
-            tp if tp.is_absolute() else base / tp,
-            Path("toolpaths") / tp,
-            Path("toolpaths") / (tp.name if tp.suffix else tp.name + ".toml"),
-        ]
-        found = next((c for c in cands if c.is_file()), None)
-        if found is None:  # a built-in toolpath by name (servosurf toolpaths)
-            from ..toolpath import builtin_toolpaths
+    if case.toolpath is not None:
+        from ..toolpath import builtin_toolpaths
 
-            name = tp.stem if tp.suffix == ".toml" else tp.name
-            found = builtin_toolpaths().get(name)
-        if found is None:
-            raise ConfigError(
-                f"{where}: toolpath {str(tp)!r}: no such file and no built-in of that "
-                f"name ({', '.join(builtin_toolpaths())})"
-            )
-        toolpath = found
-    bandwidth = (
-        _number(norm["bandwidth"], "bandwidth (Hz)", where)
-        if "bandwidth" in norm
-        else None
-    )
-    mass = (
-        _number(norm["moving-mass"], "moving-mass (kg)", where)
-        if "moving-mass" in norm
-        else None
-    )
-    kt = None
-    if "workpiece" in norm:
-        wp = Path(str(norm["workpiece"]))
-        cands = [
-            wp if wp.is_absolute() else base / wp,
-            Path("workpieces") / wp,
-            Path("workpieces") / (wp.name + ".toml"),
-        ]
-        found = next((c for c in cands if c.is_file()), None)
-        if found is None:  # a built-in workpiece by name
-            from ..cutting import builtin_workpieces
+        toolpath = _builtin_or_file(base, case.toolpath, "toolpath",
+                                    builtin_toolpaths(), where)
+    kt = workpiece = None
+    if case.workpiece is not None:
+        from ..cutting import builtin_workpieces, load_workpiece
 
-            name = wp.stem if wp.suffix == ".toml" else wp.name
-            found = builtin_workpieces().get(name)
-        if found is None:
-            raise ConfigError(
-                f"{where}: workpiece {str(wp)!r}: no such file and no built-in of that "
-                f"name ({', '.join(builtin_workpieces())})"
-            )
-        from ..cutting import load_workpiece
-
-        kt = float(load_workpiece(found).material.specific_thrust_pressure)
-    if "specific-cutting-force" in norm:
-        kt = _number(
-            norm["specific-cutting-force"], "specific-cutting-force (N/m^2)", where
-        )
-    dist = norm.get("disturbances")
+        workpiece = _builtin_or_file(base, case.workpiece, "workpiece",
+                                     builtin_workpieces(), where)
+        kt = float(load_workpiece(workpiece).material.specific_thrust_pressure)
+    if case.specific_cutting_force is not None:
+        kt = case.specific_cutting_force
+    run_keys = {"machine": machine, "workpiece": workpiece and str(workpiece),
+                "bandwidth": case.bandwidth, "mass": case.moving_mass,
+                "disturbances": case.disturbances, "preset": case.preset}
+    try:
+        run = RunConfig.from_mapping(
+            {k: v for k, v in run_keys.items() if v is not None}, prefix="case")
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
     if recs is None or not isinstance(recs, list) or not recs:
         raise ConfigError(
             f"{where}: no [[recording]] entries (each needs path and kind)"
         )
     out = []
     for i, rec in enumerate(recs):
-        if not isinstance(rec, dict):
-            raise ConfigError(f"{where}: recording {i + 1} must be a table")
-        for k in rec:
-            if k not in _REC_KEYS:
-                raise ConfigError(
-                    f"{where}: recording {i + 1}: unknown key {k!r}"
-                    f"{_suggest(k, _REC_KEYS)}"
-                )
-        if "path" not in rec or "kind" not in rec:
-            raise ConfigError(f"{where}: recording {i + 1} needs 'path' and 'kind'")
-        kind = str(rec["kind"])
-        if kind not in KINDS:
-            raise ConfigError(
-                f"{where}: recording {i + 1}: unknown kind {kind!r} "
-                f"(kinds: {', '.join(KINDS)})"
-            )
-        rp = Path(str(rec["path"]))
-        rp = rp if rp.is_absolute() else base / rp
+        table = _recording_table(rec, i, where)
+        kind = table.kind
+        rp = _resolve(base, table.path)
         if not rp.is_file():
             raise ConfigError(f"{where}: recording {i + 1}: {rp}: no such file")
         if kind in ("cut", "surface", "profile") and toolpath is None:
@@ -359,7 +418,7 @@ def load_manifest(path: str | Path) -> Manifest:
                     f"{', '.join(DIAGNOSABLE_TOOLPATHS)} (servosurf simulate and "
                     "compare handle every kind)")
         opts = {k: v for k, v in rec.items() if k not in ("path", "kind", "name")}
-        name = str(rec.get("name", rp.name))
+        name = table.name if table.name is not None else rp.name
         out.append(
             Recording(
                 name=name,
@@ -374,13 +433,14 @@ def load_manifest(path: str | Path) -> Manifest:
         raise ConfigError(f"{where}: recording names must be unique, got {names}")
     return Manifest(
         path=path,
-        machine=machine,
+        machine=str(run.machine),
         toolpath=toolpath,
-        bandwidth=bandwidth,
-        moving_mass=mass,
-        disturbances=None if dist is None else str(dist),
+        bandwidth=run.bandwidth,
+        moving_mass=run.mass,
+        disturbances=run.disturbances,
         specific_force=kt,
         recordings=tuple(out),
+        run=run,
     )
 
 
