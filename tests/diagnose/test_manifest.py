@@ -50,8 +50,8 @@ def test_case_table_values_aliases_and_recordings_alias(tmp_path):
 
 def test_preset_starts_the_case_and_keys_change_it(tmp_path):
     p = PRESETS["paper-optimum-light"]
-    man = load_manifest(_write(tmp_path / "a", '[case]\npreset = "paper-optimum-light"\n'
-                               "\n" + FE))
+    light = '[case]\npreset = "paper-optimum-light"\n'
+    man = load_manifest(_write(tmp_path / "a", light + "\n" + FE))
     assert (man.bandwidth, man.moving_mass) == (p.bandwidth, p.mass)
     assert man.run.preset == "paper-optimum-light"
     man = load_manifest(_write(tmp_path / "b", '[case]\npreset = "paper-optimum-light"'
@@ -59,7 +59,8 @@ def test_preset_starts_the_case_and_keys_change_it(tmp_path):
     assert (man.bandwidth, man.moving_mass) == (700.0, p.mass)
     with pytest.raises(ConfigError, match="unknown run preset 'paper-cuting'.*"
                        "Did you mean: paper-cutting"):
-        load_manifest(_write(tmp_path / "c", '[case]\npreset = "paper-cuting"\n\n' + FE))
+        load_manifest(_write(tmp_path / "c",
+                             '[case]\npreset = "paper-cuting"\n\n' + FE))
 
 
 @pytest.mark.parametrize("body, match", [
