@@ -34,13 +34,19 @@ def _write(folder: Path, text: str) -> Path:
 
 
 def test_case_table_values_aliases_and_recordings_alias(tmp_path):
-    m = _write(tmp_path, 'machine = "seed-prototype"\nbandwidth-hz = 500\n'
-               'mass = 0.1\n\n[[recordings]]\npath = "fe.csv"\n'
-               'kind = "following-error"\nname = "idle"\ncondition = "spindle off"\n')
+    m = _write(
+        tmp_path,
+        'machine = "seed-prototype"\nbandwidth-hz = 500\n'
+        'mass = 0.1\n\n[[recordings]]\npath = "fe.csv"\n'
+        'kind = "following-error"\nname = "idle"\ncondition = "spindle off"\n',
+    )
     man = load_manifest(m)
     assert isinstance(man, Manifest)
-    assert (man.machine, man.bandwidth, man.moving_mass) == ("seed-prototype", 500.0,
-                                                             0.1)
+    assert (man.machine, man.bandwidth, man.moving_mass) == (
+        "seed-prototype",
+        500.0,
+        0.1,
+    )
     assert man.run.bandwidth == 500.0 and man.run.mass == 0.1
     (rec,) = man.recordings
     assert rec.name == "idle" and rec.path == tmp_path / "fe.csv"
@@ -54,25 +60,43 @@ def test_preset_starts_the_case_and_keys_change_it(tmp_path):
     man = load_manifest(_write(tmp_path / "a", light + "\n" + FE))
     assert (man.bandwidth, man.moving_mass) == (p.bandwidth, p.mass)
     assert man.run.preset == "paper-optimum-light"
-    man = load_manifest(_write(tmp_path / "b", '[case]\npreset = "paper-optimum-light"'
-                               "\nbandwidth = 700.0\n\n" + FE))
+    man = load_manifest(
+        _write(
+            tmp_path / "b",
+            '[case]\npreset = "paper-optimum-light"\nbandwidth = 700.0\n\n' + FE,
+        )
+    )
     assert (man.bandwidth, man.moving_mass) == (700.0, p.mass)
-    with pytest.raises(ConfigError, match="unknown run preset 'paper-cuting'.*"
-                       "Did you mean: paper-cutting"):
-        load_manifest(_write(tmp_path / "c",
-                             '[case]\npreset = "paper-cuting"\n\n' + FE))
+    with pytest.raises(
+        ConfigError,
+        match="unknown run preset 'paper-cuting'.*Did you mean: paper-cutting",
+    ):
+        load_manifest(
+            _write(tmp_path / "c", '[case]\npreset = "paper-cuting"\n\n' + FE)
+        )
 
 
-@pytest.mark.parametrize("body, match", [
-    ("[case]\nbandwdith = 468.0\n", r"unknown case key 'bandwdith' \(did you mean: "
-                                    r"bandwidth"),
-    ("[case]\nbandwidth = -468.0\n", r"case\.bandwidth must be > 0 Hz, got -468\.0"),
-    ("[case]\nmoving-mass = 175.0\n", r"case\.moving-mass"),
-    ("[case]\nbandwidth = \"fast\"\n", r"case\.bandwidth: expected"),
-    ("[case]\nspecific-cutting-force = 0.0\n",
-     r"case\.specific-cutting-force must be > 0 N/m\^2"),
-    ("bandwidth = 468.0\nfoo = 1\n", r"unknown key 'foo'"),
-])
+@pytest.mark.parametrize(
+    "body, match",
+    [
+        (
+            "[case]\nbandwdith = 468.0\n",
+            r"unknown case key 'bandwdith' \(did you mean: "
+            r"bandwidth",
+        ),
+        (
+            "[case]\nbandwidth = -468.0\n",
+            r"case\.bandwidth must be > 0 Hz, got -468\.0",
+        ),
+        ("[case]\nmoving-mass = 175.0\n", r"case\.moving-mass"),
+        ('[case]\nbandwidth = "fast"\n', r"case\.bandwidth: expected"),
+        (
+            "[case]\nspecific-cutting-force = 0.0\n",
+            r"case\.specific-cutting-force must be > 0 N/m\^2",
+        ),
+        ("bandwidth = 468.0\nfoo = 1\n", r"unknown key 'foo'"),
+    ],
+)
 def test_case_errors_name_the_file_the_key_and_the_unit(tmp_path, body, match):
     m = _write(tmp_path, body + "\n" + FE)
     with pytest.raises(ConfigError, match=match) as exc:
@@ -80,12 +104,18 @@ def test_case_errors_name_the_file_the_key_and_the_unit(tmp_path, body, match):
     assert str(exc.value).startswith(str(m)) and "\n" not in str(exc.value)
 
 
-@pytest.mark.parametrize("extra, match", [
-    ("radius = -1e-3\n", r"recording 1: radius must be > 0 m, got -0\.001"),
-    ("start = [1.0]\n", r"recording 1: start: expected tuple\[float, float\]"),
-    ("angle_start = 0.1\n", r"recording 1: unknown key 'angle_start' \(did you mean: "
-                            r"angle-start"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ("radius = -1e-3\n", r"recording 1: radius must be > 0 m, got -0\.001"),
+        ("start = [1.0]\n", r"recording 1: start: expected tuple\[float, float\]"),
+        (
+            "angle_start = 0.1\n",
+            r"recording 1: unknown key 'angle_start' \(did you mean: "
+            r"angle-start",
+        ),
+    ],
+)
 def test_recording_errors(tmp_path, extra, match):
     m = _write(tmp_path, "bandwidth = 468.0\n\n" + FE + extra)
     with pytest.raises(ConfigError, match=match):
@@ -118,8 +148,7 @@ def test_tables_have_one_field_per_key_with_units():
     units = {f.name: f.metadata.get("unit") for f in dataclasses.fields(CaseTable)}
     assert units["bandwidth"] == "Hz" and units["moving_mass"] == "kg"
     assert units["specific_cutting_force"] == "N/m^2"
-    units = {f.name: f.metadata.get("unit")
-             for f in dataclasses.fields(RecordingTable)}
+    units = {f.name: f.metadata.get("unit") for f in dataclasses.fields(RecordingTable)}
     assert units["radius"] == units["x0"] == units["start"] == "m"
     assert units["angle_start"] == units["direction"] == "rad"
 

@@ -37,16 +37,24 @@ def _write_fe(path, t, fmt, *, bom=False, fe=None, extra=None):
 
 
 def test_kinds():
-    assert RECORDING_KINDS == ("following-error", "frf-open-loop", "frf-closed-loop",
-                               "frf-force", "cut", "surface", "profile")
+    assert RECORDING_KINDS == (
+        "following-error",
+        "frf-open-loop",
+        "frf-closed-loop",
+        "frf-force",
+        "cut",
+        "surface",
+        "profile",
+    )
 
 
 def test_csv_times_printed_with_six_digits_and_a_bom_are_read(tmp_path):
     # an independent exporter: Excel-style BOM, times as %.6g (at 0.16 s the
     # rounding is 1e-7 s, 2 % of the 5 us step)
     t = np.arange(32768) / FS
-    rec = read_recording(_write_fe(tmp_path / "fe.csv", t, ".6g", bom=True),
-                         "following-error")
+    rec = read_recording(
+        _write_fe(tmp_path / "fe.csv", t, ".6g", bom=True), "following-error"
+    )
     assert len(rec["records"]) == 1 and rec["records"][0]["fe"].size == t.size
     assert rec["fs"] == pytest.approx(FS, rel=1e-6, abs=0.0)
 
@@ -65,14 +73,20 @@ def test_csv_records_split_where_time_restarts_or_record_changes(tmp_path):
     t = np.concatenate([t1, t1, t1 + 100 / FS])
     rec_col = np.repeat([0, 1, 2], 100)
     cmd = np.linspace(0, 1e-6, 300)
-    p = _write_fe(tmp_path / "fe.csv", t, ".9g", fe=fe,
-                  extra={"record": rec_col, "command_m": cmd})
+    p = _write_fe(
+        tmp_path / "fe.csv",
+        t,
+        ".9g",
+        fe=fe,
+        extra={"record": rec_col, "command_m": cmd},
+    )
     out = read_recording(p, "following-error")
     assert len(out["records"]) == 3
     for i, r in enumerate(out["records"]):
-        np.testing.assert_allclose(r["fe"], fe[100 * i:100 * (i + 1)], rtol=1e-6)
-        np.testing.assert_allclose(r["command"], cmd[100 * i:100 * (i + 1)],
-                                   rtol=1e-8)
+        np.testing.assert_allclose(r["fe"], fe[100 * i : 100 * (i + 1)], rtol=1e-6)
+        np.testing.assert_allclose(
+            r["command"], cmd[100 * i : 100 * (i + 1)], rtol=1e-8
+        )
         assert r["t0"] == pytest.approx(t[100 * i])
         assert "force" not in r
     assert out["fs"] == pytest.approx(FS, rel=1e-8)
@@ -81,14 +95,19 @@ def test_csv_records_split_where_time_restarts_or_record_changes(tmp_path):
 def test_npz_following_error_with_records(tmp_path):
     fe = np.arange(2 * 64, dtype=float).reshape(2, 64) * 1e-12
     force = -fe * 1e3
-    np.savez(tmp_path / "fe.npz", following_error_m=fe, fs_hz=np.array(5e3),
-             force_n=force)
+    np.savez(
+        tmp_path / "fe.npz", following_error_m=fe, fs_hz=np.array(5e3), force_n=force
+    )
     out = read_recording(tmp_path / "fe.npz", "following-error")
     assert out["fs"] == 5e3 and len(out["records"]) == 2
     np.testing.assert_array_equal(out["records"][1]["fe"], fe[1])
     np.testing.assert_array_equal(out["records"][1]["force"], force[1])
-    np.savez(tmp_path / "bad.npz", following_error_m=fe, fs_hz=np.array(5e3),
-             force_n=force[:, :10])
+    np.savez(
+        tmp_path / "bad.npz",
+        following_error_m=fe,
+        fs_hz=np.array(5e3),
+        force_n=force[:, :10],
+    )
     with pytest.raises(ConfigError, match=r"bad\.npz: force_n shape"):
         read_recording(tmp_path / "bad.npz", "following-error")
     np.savez(tmp_path / "nofs.npz", following_error_m=fe)
@@ -110,8 +129,9 @@ def test_cut_csv(tmp_path):
     t = np.arange(50) / 1e4
     p = tmp_path / "cut.csv"
     rows = (f"{a!r},{a * 2e-6!r},{a * 3!r}" for a in t.tolist())
-    p.write_text("# a comment\nTime_s, following_error_m ,force_n\n"
-                 + "\n".join(rows) + "\n")
+    p.write_text(
+        "# a comment\nTime_s, following_error_m ,force_n\n" + "\n".join(rows) + "\n"
+    )
     out = read_recording(p, "cut")
     assert out["fs"] == pytest.approx(1e4)
     np.testing.assert_array_equal(out["t"], t)

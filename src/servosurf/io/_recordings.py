@@ -67,8 +67,11 @@ def read_frf_csv(source: str | Path | io.TextIOBase) -> tuple[np.ndarray, np.nda
     """
     name = str(source) if isinstance(source, str | Path) else "<buffer>"
     try:
-        fh = (open(source, newline="", encoding="utf-8-sig")
-              if isinstance(source, str | Path) else source)
+        fh = (
+            open(source, newline="", encoding="utf-8-sig")
+            if isinstance(source, str | Path)
+            else source
+        )
     except OSError as exc:
         raise ConfigError(f"{name}: cannot open FRF file: {exc.strerror}") from None
     with fh:

@@ -36,15 +36,17 @@ def _marks(ax, marks, *, scale: float = 1.0, time: bool = False) -> None:
 def _spectrum(g: dict, path: Path) -> Path:
     fig, ax = figure(figsize=(8, 4.5))
     f = g["frequency_hz"]
-    ax.loglog(f, g["measured_m2_per_hz"], color="0.75", lw=0.6,
-              label="measured (averaged)")
+    ax.loglog(
+        f, g["measured_m2_per_hz"], color="0.75", lw=0.6, label="measured (averaged)"
+    )
     ax.loglog(f, g["before_m2_per_hz"], "C0--", lw=1.2, label="model before")
     ax.loglog(f, g["after_m2_per_hz"], "C3-", lw=1.2, label="after")
     _marks(ax, g.get("marks", ()))
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("following-error PSD [m^2/Hz]")
-    ax.set_title(f"{g['recording']}: idle following-error spectrum "
-                 f"({g['records']} records)")
+    ax.set_title(
+        f"{g['recording']}: idle following-error spectrum ({g['records']} records)"
+    )
     ax.legend(fontsize=8)
     return save(fig, path)
 
@@ -55,14 +57,25 @@ def _residual(g: dict, path: Path) -> Path:
     fig, ax = figure(rows, 1, figsize=(9, 2.6 * rows))
     t = g["time_s"] * 1e3
     for lab, c in (("before", "C0"), ("after", "C3")):
-        ax[0].plot(t, g[f"residual_{lab}_m"] * 1e9, color=c, lw=0.5,
-                   label=f"residual {lab}")
-        ax[1].semilogx(g[f"band_centre_{lab}_hz"], g[f"whitened_power_{lab}"],
-                       "o-" if lab == "after" else "s--", color=c, ms=3,
-                       label=f"whitened power {lab}")
+        ax[0].plot(
+            t, g[f"residual_{lab}_m"] * 1e9, color=c, lw=0.5, label=f"residual {lab}"
+        )
+        ax[1].semilogx(
+            g[f"band_centre_{lab}_hz"],
+            g[f"whitened_power_{lab}"],
+            "o-" if lab == "after" else "s--",
+            color=c,
+            ms=3,
+            label=f"whitened power {lab}",
+        )
         if force:
-            ax[2].plot(t, g[f"force_residual_{lab}_n"] * 1e3, color=c, lw=0.5,
-                       label=f"force residual {lab}")
+            ax[2].plot(
+                t,
+                g[f"force_residual_{lab}_n"] * 1e3,
+                color=c,
+                lw=0.5,
+                label=f"force residual {lab}",
+            )
     ax[1].axhline(2.0, color="0.5", lw=0.8, ls=":")
     _marks(ax[0], g.get("marks", ()), scale=1e3, time=True)
     _marks(ax[1], g.get("marks", ()))
@@ -113,8 +126,14 @@ def _map(g: dict, path: Path) -> Path:
 def _profile(g: dict, path: Path) -> Path:
     fig, ax = figure(figsize=(9, 3.5))
     for lab, c in (("before", "C0"), ("after", "C3")):
-        ax.plot(g[f"position_{lab}_m"] * 1e3, g[f"residual_{lab}_m"] * 1e9, ".",
-                ms=1, color=c, label=lab)
+        ax.plot(
+            g[f"position_{lab}_m"] * 1e3,
+            g[f"residual_{lab}_m"] * 1e9,
+            ".",
+            ms=1,
+            color=c,
+            label=lab,
+        )
     ax.set_xlabel("position along the profile [mm]")
     ax.set_ylabel("residual [nm]")
     ax.legend(fontsize=8, markerscale=6)
@@ -122,12 +141,18 @@ def _profile(g: dict, path: Path) -> Path:
     return save(fig, path)
 
 
-_DRAW = {"spectrum": _spectrum, "residual": _residual, "frf": _frf, "map": _map,
-         "profile": _profile}
+_DRAW = {
+    "spectrum": _spectrum,
+    "residual": _residual,
+    "frf": _frf,
+    "map": _map,
+    "profile": _profile,
+}
 
 
-def diagnosis_figures(figure_data: dict[str, dict], out_dir: str | Path
-                      ) -> dict[str, Path]:
+def diagnosis_figures(
+    figure_data: dict[str, dict], out_dir: str | Path
+) -> dict[str, Path]:
     """Draw the before/after pictures of a diagnosis as PNG files.
 
     Parameters
@@ -155,7 +180,9 @@ def diagnosis_figures(figure_data: dict[str, dict], out_dir: str | Path
     for name, g in figure_data.items():
         kind = g.get("kind")
         if kind not in _DRAW:
-            raise ValueError(f"diagnosis figure {name!r}: unknown kind {kind!r} "
-                             f"(kinds: {', '.join(KINDS)})")
+            raise ValueError(
+                f"diagnosis figure {name!r}: unknown kind {kind!r} "
+                f"(kinds: {', '.join(KINDS)})"
+            )
         res[name] = _DRAW[kind](g, out_dir / f"{name}.png")
     return res
