@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from servosurf.cli import main
-from servosurf.diagnose import Manifest, load_manifest
-from servosurf.diagnose._manifest import CaseTable, RecordingTable
+from servosurf.diagnose import CaseTable, Manifest, RecordingTable, load_manifest
 from servosurf.errors import ConfigError
 from servosurf.run import PRESETS
 
