@@ -117,8 +117,9 @@ def test_pure_noise_in_sample_bic_pick_is_refused_by_the_held_out_rule():
     eng = Engine([block], None, [], None)
     eff = _Eff(f"c{k}")
     q, t = _full_fit(eng, eff)
-    assert q.a[eff.name] == pytest.approx(float(xs[k] @ y) / float(xs[k] @ xs[k]),
-                                          rel=1e-4)
+    assert q.a[eff.name] == pytest.approx(
+        float(xs[k] @ y) / float(xs[k] @ xs[k]), rel=1e-4
+    )
     h = eng.held_out(eff, q, t, [])
     fit, held = block_split(block)
     drop = _oracle_held_drop(y, xs[k], fit, held)
