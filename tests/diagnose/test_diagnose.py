@@ -267,7 +267,9 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
         "fit_after_percent",
         "unexplained_power_fraction",
         "refused",
+        "acceptance",
     }
+    assert data["acceptance"]["rule"].startswith("held-out")
     assert data["verdict"] == "explained"
     for m in data["mismatches"]:
         assert set(m) >= {"recording", "domain", "where", "significance"}
@@ -280,6 +282,7 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
         "delta_bic",
         "fit_before_percent",
         "fit_after_percent",
+        "held_out_improvement",
     }
     fitted = load_machine(dest / "fitted-machine.toml")
     d_true = k["truth"]["loop-delay"]["extra_delay_s"] * 199.6e3

@@ -92,6 +92,11 @@ class Diagnosis:
         implausible, or not seen where their physics says they must show), most
         promising first: ``effect``, ``parameters`` (SI), ``reason``,
         ``delta_deviance``, ``score``.
+    acceptance : dict
+        Acceptance rule used (:meth:`Engine.acceptance`): held-out test or the
+        in-sample fallback, its significance and the per-recording rule; each
+        explanation carries its ``held_out_improvement`` (held-out deviance drop,
+        p-value, -log10 p).
     """
 
     verdict: str
@@ -112,6 +117,7 @@ class Diagnosis:
     deviance: dict = field(default_factory=dict)
     tentative: list = field(default_factory=list)
     refused: list = field(default_factory=list)
+    acceptance: dict = field(default_factory=dict)
 
     @property
     def fit_before_percent(self) -> float:
@@ -142,6 +148,7 @@ class Diagnosis:
             "ranking": self.ranking,
             "deviance": self.deviance,
             "refused": self.refused,
+            "acceptance": self.acceptance,
         }
 
 
@@ -362,6 +369,7 @@ def _term_dict(t: Term, p: Model, ev: Evidence, fb: dict, fa: dict) -> dict:
             {k: fb[k] for k in fb if _visible(t.effect, k, ev)}
         ),
         "fit_after_percent": _mean({k: fa[k] for k in fa if _visible(t.effect, k, ev)}),
+        "held_out_improvement": t.held_out,
     }
 
 
@@ -530,4 +538,5 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
         },
         tentative=tentative,
         refused=refused,
+        acceptance=eng.acceptance(terms),
     )

@@ -22,7 +22,22 @@ DISCOVERY.md section 5.2, steps 3 to 5:
   the channel logic finds no sign of it where its physics says it must show, or
   when a parameter lies outside its physical bounds or sits at an end of its
   search range (:meth:`Effect.implausible`); refused candidates that would have
-  been accepted are kept with the reason (:attr:`Engine.refused`).
+  been accepted are kept with the reason (:attr:`Engine.refused`);
+* **out-of-sample acceptance** (issue 19 item 3): the evidence is split by
+  alternation (:func:`block_split`) into a fitting and a held-out half; a term
+  that would be accepted is refit on the fitting half only and must lower the
+  held-out deviance by more than the chi2(q) quantile at ``HELD_OUT_ALPHA``
+  (:meth:`Engine.held_out`). For q parameters fitted on one half the held-out
+  drop is ``|v|^2 - |u - v|^2 <= |v|^2 ~ chi2(q)`` under the null (u, v the
+  independent whitened projections of the two halves' noise), so the test's
+  false-alarm rate is at most ``HELD_OUT_ALPHA``. With fewer than
+  ``HELD_OUT_MIN`` held-out values the in-sample rule alone decides, flagged;
+* **every recording must agree** (issue 19 item 4): a term that predicts a
+  large signature in a recording (expected deviance reduction above
+  ``RECORDING_MIN_EXPECTED``) must show there at least
+  :func:`recording_bar` of it, in the fit on all the data and, with two or more
+  such recordings, when it is refit without that recording (leave one recording
+  out, :meth:`Engine.recording_refusal`).
 """
 
 from __future__ import annotations
@@ -35,7 +50,15 @@ import scipy as sp
 
 from .effects._base import Config, Effect, Evidence, Model
 
-__all__ = ["Engine", "Term", "Candidate", "Refusal"]
+__all__ = [
+    "Engine",
+    "Term",
+    "Candidate",
+    "Refusal",
+    "block_split",
+    "held_out_decision",
+    "recording_bar",
+]
 
 #: Constant of the selection score. DISCOVERY.md's prototype used 6; calibrated on
 #: null cases it is 0: the largest best-candidate score of 60 null cases (the blind
@@ -59,6 +82,103 @@ MIN_LINEAR_SCORE = -15.0
 #: Further configurations of a module tried when the channel logic refuses its
 #: best-ranked one.
 CHANNEL_RETRIES = 3
+#: Significance of the held-out test: a term's held-out deviance drop must exceed
+#: the chi2(q) quantile at this upper-tail probability (q fitted parameters).
+HELD_OUT_ALPHA = 0.05
+#: Fewest held-out values (in the blocks a term touches) for the held-out test;
+#: below it the in-sample rule decides alone and the term is flagged.
+HELD_OUT_MIN = 64
+#: Length of the alternating windows of map and profile residuals (values): the
+#: whitened map residual may keep a short-range correlation between neighbours.
+MAP_WINDOW = 8
+#: A recording where a term's expected deviance reduction exceeds this must show
+#: the term (:func:`recording_bar`).
+RECORDING_MIN_EXPECTED = 9.0
+#: Function evaluations of the refits on part of the data (held-out and
+#: leave-one-recording-out).
+PART_NFEV = 40
+
+
+def block_split(block, size: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Split a block's whitened residual into a fitting and a held-out half.
+
+    The halves alternate along the block's natural unit, chosen so that the
+    noise of the two halves is independent: records of a time recording (with
+    two or more records; otherwise frequency bins, the real and imaginary part
+    of a bin staying together), frequency bins of an FRF (log-magnitude and phase
+    of a bin together) and of an idle spectrum, windows of ``MAP_WINDOW``
+    consecutive values of a map or profile, single values otherwise.
+
+    Parameters
+    ----------
+    block : Block
+        The block (its ``domain``, ``n`` and, for time records, ``meta``).
+    size : int, optional
+        Length of the block's residual vector (default: ``block.n``).
+
+    Returns
+    -------
+    fit, held : ndarray of int
+        Disjoint sorted indices into the residual vector; together they cover it.
+    """
+    n = int(block.n if size is None else size)
+    idx = np.arange(n)
+    label = idx % 2
+    dom = getattr(block, "domain", "")
+    if dom == "time":
+        sizes = [int(np.count_nonzero(m[0])) for m in getattr(block, "meta", [])]
+        if sizes and 2 * sum(sizes) == n:
+            parts = []
+            for k, m in enumerate(sizes):
+                if len(sizes) >= 2:
+                    lab = np.full(m, k % 2)
+                else:
+                    lab = np.arange(m) % 2
+                parts += [lab, lab]
+            label = np.concatenate(parts)
+    elif dom == "frf" and n % 2 == 0:
+        half = np.arange(n // 2) % 2
+        label = np.concatenate([half, half])
+    elif dom in ("map", "profile"):
+        label = (idx // MAP_WINDOW) % 2
+    return idx[label == 0], idx[label == 1]
+
+
+def held_out_decision(drop: float, n_params: int) -> dict:
+    """Held-out test of one term.
+
+    Parameters
+    ----------
+    drop : float
+        Deviance drop on the held-out half when the term is fitted on the other
+        half (dimensionless; negative when it worsens the held-out fit).
+    n_params : int
+        Fitted parameters of the term (chi2 degrees of freedom).
+
+    Returns
+    -------
+    dict
+        ``delta_deviance``, ``threshold`` (chi2 quantile at ``HELD_OUT_ALPHA``),
+        ``p_value`` (chi2 upper tail of the drop; an upper bound of the null
+        probability), ``neg_log10_p`` and ``passed``.
+    """
+    q = max(int(n_params), 1)
+    thr = float(sp.stats.chi2.isf(HELD_OUT_ALPHA, q))
+    pv = float(sp.stats.chi2.sf(drop, q)) if drop > 0 else 1.0
+    return {
+        "delta_deviance": round(float(drop), 2),
+        "threshold": round(thr, 2),
+        "p_value": pv,
+        "neg_log10_p": round(-math.log10(max(pv, 1e-300)), 2),
+        "passed": bool(drop > thr),
+    }
+
+
+def recording_bar(expected: float) -> float:
+    """Least observed deviance reduction in a recording where a term predicts
+    ``expected``: half of it less three standard deviations (``2 sqrt(expected)``)
+    of the observed reduction under the term (dimensionless)."""
+    return 0.5 * expected - 3.0 * 2.0 * math.sqrt(max(expected, 0.0))
 
 
 @dataclass
@@ -70,6 +190,8 @@ class Term:
     config: Config | None = None
     delta_deviance: float = 0.0
     score: float = 0.0
+    #: held-out test of the term when it was accepted (JSON-ready)
+    held_out: dict | None = None
 
 
 @dataclass
@@ -146,6 +268,9 @@ class Engine:
         #: candidates refused although their score was positive, by effect (the
         #: highest-scoring refusal of each)
         self.refused: dict[str, Refusal] = {}
+        #: apply the out-of-sample rules (held-out and leave-one-recording-out)
+        self.out_of_sample = True
+        self._splits: dict = {}
 
     # ------------------------------------------------------------ deviance
     def block_residual(self, i: int, p: Model, cache: bool = True) -> np.ndarray:
@@ -175,6 +300,29 @@ class Engine:
     def block_deviances(self, p: Model) -> list[float]:
         """Deviance per block."""
         return [float(r @ r) for r in self.residuals(p)]
+
+    def split(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`block_split` of block ``i`` (cached per block object)."""
+        b = self.blocks[i]
+        key = (i, id(b))
+        s = self._splits.get(key)
+        if s is None:
+            s = block_split(b, int(self.block_residual(i, Model()).size))
+            self._splits[key] = s
+        return s
+
+    def part_residuals(self, p: Model, parts: dict) -> list[np.ndarray]:
+        """Whitened residuals of the blocks in ``parts`` (block index to indices
+        into its residual; ``None``: the whole block)."""
+        out = []
+        for i, sel in parts.items():
+            r = self.block_residual(i, p)
+            out.append(r if sel is None else r[sel])
+        return out
+
+    def part_deviance(self, p: Model, parts: dict) -> float:
+        """Deviance of the parts ``parts`` of the blocks (:meth:`part_residuals`)."""
+        return float(sum(float(r @ r) for r in self.part_residuals(p, parts)))
 
     def _relevant(self, eff: Effect) -> list[int]:
         return [i for i, b in enumerate(self.blocks) if set(b.groups) & eff.groups]
@@ -262,6 +410,7 @@ class Engine:
         *,
         max_nfev: int = 60,
         only_last: bool = False,
+        parts: dict | None = None,
     ) -> Model:
         """Nonlinear least squares of the exact deviance over the terms' parameters.
 
@@ -273,6 +422,8 @@ class Engine:
             Terms whose parameters are free (``only_last``: the last one only).
         max_nfev : int, default: 60
             Function evaluations of the solver.
+        parts : dict, optional
+            Fit these parts of the blocks only (:meth:`part_residuals`).
 
         Returns
         -------
@@ -307,11 +458,16 @@ class Engine:
             ]
         )
 
+        def dev(q):
+            return self.deviance(q) if parts is None else self.part_deviance(q, parts)
+
         def fun(z):
             q = from_x(x0 + z * scale)
-            return np.concatenate(self.residuals(q))
+            if parts is None:
+                return np.concatenate(self.residuals(q))
+            return np.concatenate(self.part_residuals(q, parts))
 
-        d0 = self.deviance(from_x(x0))
+        d0 = dev(from_x(x0))
         try:
             sol = sp.optimize.least_squares(
                 fun,
@@ -325,7 +481,7 @@ class Engine:
                 ftol=1e-6,
             )
             q = from_x(x0 + sol.x * scale)
-            if self.deviance(q) <= d0:
+            if dev(q) <= d0:
                 return q
         except (ValueError, np.linalg.LinAlgError):
             pass
@@ -368,11 +524,106 @@ class Engine:
 
     def refusal(self, eff: Effect, q: Model, term: Term) -> str | None:
         """Why term ``term`` of ``q`` cannot be accepted (None: it can): the
-        channel logic, then the physical plausibility of its parameters."""
+        channel logic, every recording's agreement (in sample), then the
+        physical plausibility of its parameters."""
         why = self._channel_refusal(eff, q, term)
         if why is not None:
             return why
+        if self.out_of_sample:
+            why = self._recordings_disagree(eff, q, term.slot, self._relevant(eff))
+            if why is not None:
+                return why
         return eff.implausible(q, term.slot, self.evidence, term.config)
+
+    # ------------------------------------------------------------ out of sample
+    def recording_gains(self, eff: Effect, q: Model, slot: int,
+                        idx: list[int]) -> dict[str, tuple[float, float, str]]:
+        """Per recording among blocks ``idx``: ``(observed, expected, domains)``
+        deviance reduction of term ``slot`` of ``q`` (observed on the data,
+        expected if the term is true: the squared whitened change it makes)."""
+        without = eff.remove(q, slot)
+        out: dict[str, list] = {}
+        for i in idx:
+            b = self.blocks[i]
+            a, c = self.block_residual(i, without), self.block_residual(i, q)
+            g = out.setdefault(b.recording, [0.0, 0.0, []])
+            g[0] += float(a @ a) - float(c @ c)
+            g[1] += float((a - c) @ (a - c))
+            if b.domain not in g[2]:
+                g[2].append(b.domain)
+        return {k: (v[0], v[1], "/".join(v[2])) for k, v in out.items()}
+
+    def _recordings_disagree(self, eff: Effect, q: Model, slot: int,
+                             idx: list[int], note: str = "") -> str | None:
+        for rec, (obs, exp, dom) in self.recording_gains(eff, q, slot, idx).items():
+            if exp > RECORDING_MIN_EXPECTED and obs < recording_bar(exp):
+                return (f"predicted on {rec} ({dom}), not seen{note}: deviance "
+                        f"reduction {obs:.1f} there (it predicts {exp:.1f}), "
+                        f"{recording_bar(exp):.1f} required")
+        return None
+
+    def recording_refusal(self, eff: Effect, q: Model, term: Term,
+                          terms: list[Term]) -> str | None:
+        """Leave one recording out: with two or more recordings where the term
+        predicts a large signature, it is refit without each of them in turn and
+        must show in the one left out (:func:`recording_bar`)."""
+        idx = self._relevant(eff)
+        gains = self.recording_gains(eff, q, term.slot, idx)
+        big = [r for r, g in gains.items() if g[1] > RECORDING_MIN_EXPECTED]
+        if len(big) < 2:
+            return None
+        for rec in big:
+            parts = {i: None for i in range(len(self.blocks))
+                     if self.blocks[i].recording != rec}
+            qj = self.fit(q, terms + [term], only_last=True, parts=parts,
+                          max_nfev=PART_NFEV)
+            mine = [i for i in idx if self.blocks[i].recording == rec]
+            why = self._recordings_disagree(
+                eff, qj, term.slot, mine, " when fitted on the other recordings"
+            )
+            if why is not None:
+                return why
+        return None
+
+    def held_out(self, eff: Effect, q: Model, term: Term, terms: list[Term]) -> dict:
+        """Held-out test of term ``term`` of ``q``: refit on the fitting halves of
+        the blocks (:func:`block_split`), deviance drop on the held-out halves.
+
+        Returns
+        -------
+        dict
+            :func:`held_out_decision`'s fields plus ``n_held_out`` and
+            ``in_sample_fallback`` (True: too few held-out values,
+            ``passed`` is then True and the in-sample rule decides).
+        """
+        idx = self._relevant(eff)
+        n_held = int(sum(self.split(i)[1].size for i in idx))
+        q_par = eff.n_params(term.config)
+        if n_held < HELD_OUT_MIN:
+            return {"in_sample_fallback": True, "n_held_out": n_held,
+                    "n_params": q_par, "passed": True}
+        fit_parts = {i: self.split(i)[0] for i in range(len(self.blocks))}
+        held_parts = {i: self.split(i)[1] for i in idx}
+        qa = self.fit(q, terms + [term], only_last=True, parts=fit_parts,
+                      max_nfev=PART_NFEV)
+        base = eff.remove(qa, term.slot)
+        drop = self.part_deviance(base, held_parts) - self.part_deviance(qa, held_parts)
+        out = held_out_decision(drop, q_par)
+        out.update({"in_sample_fallback": False, "n_held_out": n_held,
+                    "n_params": q_par})
+        return out
+
+    def out_of_sample_refusal(self, eff: Effect, q: Model, term: Term,
+                              terms: list[Term]) -> str | None:
+        """Why the out-of-sample rules refuse a term the in-sample rules accept
+        (None: they do not); the held-out test is kept in ``term.held_out``."""
+        h = self.held_out(eff, q, term, terms)
+        term.held_out = h
+        if not h["passed"]:
+            return (f"no held-out improvement: deviance drop {h['delta_deviance']:.1f}"
+                    f" on {h['n_held_out']} held-out values, {h['threshold']:.1f} "
+                    f"required (p = {h['p_value']:.2g})")
+        return self.recording_refusal(eff, q, term, terms)
 
     def _refuse(self, eff: Effect, q: Model, term: Term, reason: str, lam: float,
                 score: float) -> None:
@@ -427,6 +678,8 @@ class Engine:
         n_cfg = max(len(c.effect.configs(self.evidence, p)), 1)
         score = lam - self.penalty(c.effect, n_cfg, c.config)
         why = self.refusal(c.effect, q, tnew)
+        if why is None and score > 0 and self.out_of_sample:
+            why = self.out_of_sample_refusal(c.effect, q, tnew, terms)
         if why is not None:
             self._refuse(c.effect, q, tnew, why, lam, score)
             if progress and score > 0:
@@ -551,7 +804,8 @@ class Engine:
         return [
             u
             if u.effect is not t.effect or u.slot < t.slot
-            else Term(u.effect, u.slot - 1, u.config, u.delta_deviance, u.score)
+            else Term(u.effect, u.slot - 1, u.config, u.delta_deviance, u.score,
+                      u.held_out)
             for k, u in enumerate(terms)
             if k != j
         ]
@@ -580,6 +834,29 @@ class Engine:
         if changed:
             self._contributions(p, terms)
         return p, terms
+
+    def acceptance(self, terms: list[Term]) -> dict:
+        """The acceptance rule used (JSON-ready ``acceptance`` block)."""
+        fallback = any(
+            (t.held_out or {}).get("in_sample_fallback", False) for t in terms
+        )
+        if not self.out_of_sample:
+            rule = "in-sample"
+        elif fallback:
+            rule = "held-out (in-sample fallback for some terms)"
+        else:
+            rule = "held-out"
+        return {
+            "rule": rule,
+            "in_sample_fallback": bool(fallback or not self.out_of_sample),
+            "held_out_alpha": HELD_OUT_ALPHA,
+            "held_out_min_values": HELD_OUT_MIN,
+            "split": "alternate records (time), bins (FRF, spectrum), "
+                     f"windows of {MAP_WINDOW} values (map, profile)",
+            "recording_rule": "observed >= 0.5*expected - 6*sqrt(expected) where "
+                              f"expected > {RECORDING_MIN_EXPECTED:g}, in sample "
+                              "and leaving each recording out",
+        }
 
     def _contributions(self, p: Model, terms: list[Term]) -> None:
         """Removal cost (deviance) and score of each term at the model ``p``."""
