@@ -83,6 +83,9 @@ def _term(name: str, case, ev):
         return (E.ElasticRecoveryParams(0.002),)
     if name == "recalibration":
         return (E.RecalibrationParams(moving_mass=0.185, force_constant=7.6),)
+    if name == "spindle-async-error":
+        return (E.SpindleAsyncErrorParams(173.3, 2e-9, 0.4),
+                E.SpindleAsyncErrorParams(411.7, 1e-9, -1.0))
     raise KeyError(name)
 
 

@@ -9,7 +9,7 @@ optional refinement) and its report. :mod:`._base` defines the protocol
 (:class:`EffectParams`, :class:`Effect`, :class:`Model`, :class:`Evidence`). The
 diagnosis's engine, blocks, locators and report know no effect by name.
 
-Adding an effect (the 16th)
+Adding an effect (the 17th)
 ---------------------------
 1. Write ``_my_effect.py`` next to the others: a frozen ``MyEffectParams(EffectParams)``
    with ``effect = "my-effect"``, every field declared with :func:`quantity` (unit,
@@ -59,6 +59,7 @@ from ._loop_delay import LoopDelayEffect, LoopDelayParams
 from ._recalibration import RecalibrationEffect, RecalibrationParams
 from ._sensor_noise_shape import SensorNoiseShapeEffect, SensorNoiseShapeParams
 from ._sensor_nonlinearity import SensorNonlinearityEffect, SensorNonlinearityParams
+from ._spindle_async_error import SpindleAsyncErrorEffect, SpindleAsyncErrorParams
 from ._spindle_axial_error import SpindleAxialErrorEffect, SpindleAxialErrorParams
 from ._structural_mode import StructuralModeEffect, StructuralModeParams
 from ._thermal_drift import ThermalDriftEffect, ThermalDriftParams
@@ -95,6 +96,7 @@ __all__ = [
     "SpindleAxialErrorParams",
     "ElasticRecoveryParams",
     "RecalibrationParams",
+    "SpindleAsyncErrorParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -114,6 +116,7 @@ CATALOGUE: tuple[Effect, ...] = (
     SpindleAxialErrorEffect(),
     ElasticRecoveryEffect(),
     RecalibrationEffect(),
+    SpindleAsyncErrorEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])
