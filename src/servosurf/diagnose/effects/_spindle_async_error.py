@@ -170,10 +170,11 @@ class SpindleAsyncErrorEffect(Effect):
         return None
 
     def refine(self, engine, model, term):
-        """Scan the new term's frequency over the located line's bin on the map and
-        profile blocks (their deviance oscillates in frequency with period 1/T:
-        a local solver started off the main lobe stops in a side lobe), with the
-        amplitude and phase solved linearly at each frequency."""
+        """Scan the new term's frequency over +-0.75 Hz around the located line and its
+        FTS gate sidebands on the map and profile blocks (their deviance
+        oscillates in frequency with period 1/T: a local solver started off the
+        main lobe stops in a side lobe), with the amplitude and phase solved
+        linearly at each frequency."""
         i = term.slot
         t_span = _map_span(engine)
         q0 = self.term(model, i)
@@ -182,31 +183,37 @@ class SpindleAsyncErrorEffect(Effect):
         blocks = [k for k, b in enumerate(engine.blocks)
                   if b.domain in ("surface", "profile")]
         base = self.remove(model, i)
-
-        def dev(q):
-            return sum(float(np.sum(engine.block_residual(k, q, cache=False) ** 2))
-                       for k in blocks)
+        r0 = np.concatenate([engine.block_residual(k, base, cache=False)
+                             for k in blocks])
 
         def best_at(f):
-            # amplitude and phase by least squares on the two quadratures
-            r0 = [engine.block_residual(k, base, cache=False) for k in blocks]
+            # amplitude and phase by linear least squares on the two quadratures
+            # (the heights are linear in the term); deviance of the blocks with it
             cols = []
             for ph in (0.0, -math.pi / 2):
                 q = base.add(SpindleAsyncErrorParams(float(f), 1e-9, ph))
                 cols.append(np.concatenate([
-                    engine.block_residual(k, q, cache=False) - r
-                    for k, r in zip(blocks, r0, strict=True)]))
+                    engine.block_residual(k, q, cache=False) for k in blocks]) - r0)
             a = np.column_stack(cols)
-            c, *_ = np.linalg.lstsq(a, -np.concatenate(r0), rcond=None)
+            c, *_ = np.linalg.lstsq(a, -r0, rcond=None)
+            d = float(np.sum((r0 + a @ c) ** 2))
             amp = min(1e-9 * math.hypot(c[0], c[1]), 0.99e-6)
-            q = base.add(SpindleAsyncErrorParams(float(f), amp,
-                                                 math.atan2(-c[1], c[0])))
-            return dev(q), q
+            return d, (float(f), amp, math.atan2(-c[1], c[0]))
 
-        grid = q0.frequency + np.arange(-1.0, 1.0 + 1e-9, 1.0 / (6 * t_span))
-        grid = grid[grid >= 1.0]
-        cands = [best_at(f) for f in grid]
-        d, q = min(cands, key=lambda v: v[0])
-        # keep the new term in its slot (the base model has it removed)
-        q = model.replace_term(NAME, i, q.get(NAME)[-1])
+        # maps and profiles see the tool only while it cuts (a gate at the FTS
+        # frequency): the located peak may be a gate sideband f +- k f_FTS, so
+        # every alias within two FTS harmonics is scanned and the best kept
+        fts = engine.evidence.fts
+        centres = [q0.frequency + k * fts for k in (0, -1, 1, -2, 2)] if fts > 0 \
+            else [q0.frequency]
+        step = 1.0 / (4 * t_span)
+        cands = []
+        for c in centres:
+            grid = c + np.arange(-0.75, 0.75 + 1e-9, step)
+            grid = grid[(grid >= 1.0) & (grid <= MAX_FREQUENCY)]
+            cands += [best_at(f) for f in grid]
+        if not cands:
+            return model
+        _d, (f, a, ph) = min(cands, key=lambda v: v[0])
+        q = model.replace_term(NAME, i, SpindleAsyncErrorParams(f, a, ph))
         return q if engine.deviance(q) <= engine.deviance(model) else model

@@ -1,0 +1,131 @@
+"""Path-side catalogue effects (issue 19 item 7): asynchronous spindle error.
+
+* the hook, simulated through :func:`servosurf.simulation.simulate` on a facing cut,
+  changes the machined surface by ``a cos(2 pi f t + phi)`` at the time of the pass
+  that cut each pixel, the pass times computed here from the facing geometry with
+  plain numpy (an oracle sharing no code with the sweep kernel or the diagnosis);
+* the non-integer order test;
+* a detection test: a case of the discovery benchmark's generator (drifting sines,
+  not the catalogue's fixed sine) diagnosed from its map and ring profile.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from servosurf.diagnose import effects as E
+
+REPO = Path(__file__).resolve().parents[2]
+FACING = REPO / "toolpaths" / "flat_facing.toml"
+
+
+def _small_facing():
+    """A facing cut with a 10 um feed (25 nm cusps) at 600 rpm over a small field."""
+    from servosurf.toolpath import load_toolpath
+
+    spec = load_toolpath(FACING)
+    path = dataclasses.replace(spec.path, feed_per_rev=10e-6, spindle_speed=10.0,
+                               r_start=5.2e-3)
+    fld = dataclasses.replace(spec.field, nx=40, ny=30, pitch_x=1.0e-6,
+                              pitch_y=1.0e-6)
+    return dataclasses.replace(spec, path=path, field=fld)
+
+
+def _pass_times(spec, x, y):
+    """Time (s) of the pass nearest to each point and its radial offset (m):
+    plain numpy on the facing geometry r(t) = r_start - feed n t, theta(t) =
+    theta0 + 2 pi n t."""
+    p = spec.path
+    n = p.spindle_speed
+    r = np.hypot(x, y)
+    th = np.arctan2(y, x)
+    t0 = np.mod(th - p.theta_start, 2 * math.pi) / (2 * math.pi * n)
+    j = np.rint(((p.r_start - r) / (p.feed_per_rev * n) - t0) * n)
+    t = t0 + j / n
+    dr = r - (p.r_start - p.feed_per_rev * n * t)
+    return t, dr
+
+
+def test_async_error_simulates_as_a_fixed_sine_at_the_pass_times():
+    from servosurf.simulation import simulate
+
+    spec = _small_facing()
+    q = E.SpindleAsyncErrorParams(frequency=237.3, amplitude=2e-9, phase=0.7)
+    nom = simulate(spec, parts=("tracking",))
+    res = simulate(spec, parts=("tracking",), hooks=[q])
+    x, y = spec.field.coords()
+    xx, yy = np.meshgrid(x, y)
+    t, dr = _pass_times(spec, xx, yy)
+    # near the pass centre the same pass cuts with and without the term: the cusp
+    # (f^2 / 8R = 25 nm) exceeds twice the amplitude there by far
+    centre = np.abs(dr) < 0.25 * spec.path.feed_per_rev
+    assert centre.sum() > 100
+    want = q.amplitude * np.cos(2 * math.pi * q.frequency * t + q.phase)
+    got = (res.surface.z - nom.surface.z)[centre]
+    np.testing.assert_allclose(got, want[centre], rtol=0, atol=1e-3 * q.amplitude)
+    # the pattern is not a spindle order: it differs between revolutions at the
+    # same angle (one column of the field: the same angle, successive passes)
+    assert np.ptp(want[centre]) > q.amplitude
+
+
+def test_non_integer_order_test():
+    from servosurf.diagnose.effects._spindle_async_error import is_synchronous
+
+    fsp = 250.0 / 60.0
+    assert is_synchronous(7 * fsp, fsp)
+    assert is_synchronous(7.015 * fsp, fsp)
+    assert not is_synchronous(7.03 * fsp, fsp)
+    assert not is_synchronous(7.5 * fsp, fsp)
+    assert not is_synchronous(0.4 * fsp, fsp)  # below the first order
+    assert not is_synchronous(100.0, 0.0)  # no spindle
+
+
+def _generated_case(discovery, tmp: Path, effect: str, enr: float, seed: int):
+    """A case of the benchmark generator with only its map, ring profile and idle
+    records in the manifest; returns (manifest path, truth)."""
+    C = discovery("cases")
+    campaign = C.CAMPAIGNS["test"]
+    spec = {"effects": [effect], "ool": None, "enr": enr, "seed": seed}
+    p, ool, truth, _achieved = C.build(spec, campaign)
+    full = tmp / "full"
+    C.write_case(full, p, ool, campaign, seed)
+    text = (full / "manifest.toml").read_text()
+    head, *recs = text.split("[[recording]]")
+    keep = [r for r in recs if re.search(r'kind = "(surface|profile)"', r)
+            or "idle.npz" in r]
+    tp = re.search(r'toolpath = "(.*)"', head).group(1)
+    head = head.replace(tp, str((full / tp).resolve()))
+    case = tmp / "case"
+    case.mkdir()
+    for r in keep:
+        name = re.search(r'path = "(.*)"', r).group(1)
+        shutil.copy(full / name, case / name)
+    (case / "manifest.toml").write_text(head + "".join("[[recording]]" + r
+                                                       for r in keep))
+    return case / "manifest.toml", truth[effect]
+
+
+@pytest.mark.slow
+def test_async_error_is_detected_and_named(discovery, tmp_path):
+    """Drifting sines at a non-integer order (ENR 0.5) on the map and ring
+    profile: named spindle-async-error, frequency and amplitude within 10 %;
+    a base line at that frequency is refused by the idle records."""
+    from servosurf.diagnose import diagnose, get_effect
+
+    manifest, truth = _generated_case(discovery, tmp_path, "spindle-async-error",
+                                      0.5, 11)
+    names = ("spindle-async-error", "base-vibration-lines", "spindle-axial-error",
+             "thermal-drift")
+    d = diagnose(manifest, effects=[get_effect(n) for n in names], max_terms=1)
+    ex = sorted(d.to_dict()["explanations"], key=lambda e: -e["delta_bic"])
+    assert ex and ex[0]["effect"] == "spindle-async-error", [e["effect"] for e in ex]
+    par = ex[0]["parameters"]
+    assert par["frequency_1_hz"] == pytest.approx(truth["frequency_1_hz"], rel=1e-3)
+    assert par["amplitude_1_m"] == pytest.approx(truth["amplitude_1_m"], rel=0.1)
