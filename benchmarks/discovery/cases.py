@@ -106,6 +106,7 @@ EFFECTS = (
     "spindle-axial-error",
     "elastic-recovery",
     "spindle-async-error",
+    "tool-wear",
 )
 #: Effects outside the catalogue.
 OOL = (
@@ -387,8 +388,20 @@ def sweep_surface(case: CaseModel, p: Model, traj, field, noise_fn=None):
     if noise_fn is not None:
         z = z + noise_fn(path.t)
     path = path.with_z(z)
-    surf = sweep(path, tool, field, check=False)
-    zz = surf.z.copy()
+    wear = _one(p, "tool-wear")
+    if wear is None:
+        surf = sweep(path, tool, field, check=False)
+        zz = surf.z.copy()
+    else:  # each ring (revolution) with its own worn radius: envelope of the rings
+        ring = np.floor(path.t * spec.path.angular_speed / (2 * math.pi))
+        zz = None
+        for k in np.unique(ring):
+            sel = ring == k
+            piece = type(path)(path.t[sel], path.theta[sel], path.r[sel],
+                               path.z[sel], path.fs)
+            tk = wear.tool_at(tool, 0.5 * (piece.t[0] + piece.t[-1]))
+            zk = sweep(piece, tk, field, check=False).z
+            zz = zk.copy() if zz is None else np.fmin(zz, zk)
     rc = _one(p, "elastic-recovery")
     if rc is not None and rc.recovery:
         zz = zz + rc.recovery * (0.0 - zz)
@@ -676,7 +689,54 @@ def draw(effect: str, rng) -> tuple:
         return kn, lambda s: kn(s)[0].report(), 1e-3
     if effect == "spindle-async-error":
         return _draw_async(case, rng)
+    if effect == "tool-wear":
+        return _draw_wear(case, rng)
     raise KeyError(effect)
+
+
+@dataclasses.dataclass(frozen=True)
+class SaturatingWear(E.EffectParams):
+    """Generator form of tool wear (not the catalogue's linear growth): the nose
+    radius grows by ``A (1 - exp(-L / L0))`` with the cutting length ``L = v t``
+    (break-in wear that levels off), tip held."""
+
+    effect = "tool-wear"
+
+    growth_limit: float = 0.0  # m, A
+    length_scale: float = 1.0  # m, L0
+    speed: float = 0.0  # m/s, v
+
+    def grown(self, t):
+        t = np.maximum(np.asarray(t, dtype=float), 0.0)
+        return self.growth_limit * -np.expm1(-self.speed * t / self.length_scale)
+
+    def tool(self, tool):
+        return tool
+
+    def edge(self, phi):
+        return 0.0, None
+
+    def tool_at(self, tool, t):
+        return dataclasses.replace(tool, nose_radius=tool.nose_radius
+                                   + float(self.grown(t)))
+
+    def edge_at(self, t, phi):
+        return self.grown(t), None
+
+
+def _draw_wear(case, rng):
+    """Saturating radius growth, its length scale 0.3-2 times the cut's length."""
+    from servosurf.diagnose.effects._tool_wear import cutting_speed
+
+    v = cutting_speed(case.toolpath)
+    length = v * case.toolpath.path.duration
+    u = float(rng.uniform(0.3, 2.0))
+
+    def kn(s):
+        # s: radius growth (m) at the end of the toolpath
+        return (SaturatingWear(s / -math.expm1(-1.0 / u), u * length, v),)
+
+    return kn, lambda s: {"growth": s / length}, 1e-6
 
 
 @dataclasses.dataclass(frozen=True)

@@ -148,6 +148,8 @@ def param_error(effect: str, truth: dict, est: dict, nominal: dict) -> float:
         if best is None:
             return float("inf")
         return max(_rel(best[0], f0), _rel(best[1], a0))
+    if effect == "tool-wear":
+        return _rel(est["growth"], truth["growth"])
     return float("nan")
 
 
