@@ -175,3 +175,38 @@ def test_wear_simulates_as_arcs_of_growing_radius():
     tol = rate * 0.4e-3 * (spec.path.feed_per_rev ** 2) / (2 * R0**2) + 1e-13
     assert np.ptp(want) > 1e-9  # the cusps drop by nanometres over the field
     np.testing.assert_allclose(got, want, rtol=0, atol=tol + 1e-3 * np.ptp(want))
+
+
+@pytest.mark.slow
+def test_wear_is_detected_and_named(discovery, tmp_path):
+    """A map over the three lenslet rings (4.5 um pixels) of a tool whose radius
+    grows by the generator's saturating law (not the catalogue's linear one) by
+    0.3 um over the toolpath: named tool-wear, not a static radius error, with
+    the mean growth within 30 %."""
+    from servosurf.diagnose import diagnose, get_effect
+
+    C = discovery("cases")
+    case = C.base_case()
+    spec = case.toolpath
+    rng = np.random.default_rng(31)
+    kn, truth, _s0 = C.draw("tool-wear", rng)
+    p = E.Model.of(*kn(0.3e-6))
+    fld = dataclasses.replace(spec.field, nx=90, ny=70, pitch_x=4.5e-6,
+                              pitch_y=4.5e-6, center_x=9.8e-3, center_y=0.0)
+    traj = C.tool_series(case, E.Model(), None, spec.path.duration)
+    z = C.sweep_surface(case, p, traj, fld)
+    z = z + C.INSTRUMENT_NOISE * rng.standard_normal(z.shape)
+    np.savez(tmp_path / "surface.npz", z=z, dx=fld.pitch_x, dy=fld.pitch_y,
+             x0=fld.x0, y0=fld.y0)
+    (tmp_path / "manifest.toml").write_text(
+        f'[case]\nmachine = "seed-prototype"\ntoolpath = "{C.TOOLPATH.as_posix()}"\n'
+        f"bandwidth = {C.BANDWIDTH}\nmoving-mass = {C.MASS}\n\n"
+        '[[recording]]\npath = "surface.npz"\nkind = "surface"\n')
+    names = ("tool-wear", "tool-radius-error", "thermal-drift")
+    d = diagnose(tmp_path / "manifest.toml", effects=[get_effect(n) for n in names],
+                 max_terms=2)
+    ex = sorted(d.to_dict()["explanations"], key=lambda e: -e["delta_bic"])
+    assert ex and ex[0]["effect"] == "tool-wear", [(e["effect"], e["parameters"])
+                                                   for e in ex]
+    want = truth(0.3e-6)["growth"]
+    assert ex[0]["parameters"]["growth"] == pytest.approx(want, rel=0.3)
