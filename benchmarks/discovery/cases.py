@@ -105,6 +105,8 @@ EFFECTS = (
     "cutting-force-coefficient",
     "spindle-axial-error",
     "elastic-recovery",
+    "spindle-async-error",
+    "tool-wear",
 )
 #: Effects outside the catalogue.
 OOL = (
@@ -279,6 +281,8 @@ def path_terms(p: Model, t, theta, z):
     dz = dz + rate * t
     for q in p.get("spindle-axial-error"):
         dz = dz + q.amplitude * np.cos(q.order * theta + q.phase)
+    for q in p.get("spindle-async-error"):
+        dz = dz + q.path_z(t, theta, None, z)
     return dz
 
 
@@ -384,8 +388,20 @@ def sweep_surface(case: CaseModel, p: Model, traj, field, noise_fn=None):
     if noise_fn is not None:
         z = z + noise_fn(path.t)
     path = path.with_z(z)
-    surf = sweep(path, tool, field, check=False)
-    zz = surf.z.copy()
+    wear = _one(p, "tool-wear")
+    if wear is None:
+        surf = sweep(path, tool, field, check=False)
+        zz = surf.z.copy()
+    else:  # each ring (revolution) with its own worn radius: envelope of the rings
+        ring = np.floor(path.t * spec.path.angular_speed / (2 * math.pi))
+        zz = None
+        for k in np.unique(ring):
+            sel = ring == k
+            piece = type(path)(path.t[sel], path.theta[sel], path.r[sel],
+                               path.z[sel], path.fs)
+            tk = wear.tool_at(tool, 0.5 * (piece.t[0] + piece.t[-1]))
+            zk = sweep(piece, tk, field, check=False).z
+            zz = zk.copy() if zz is None else np.fmin(zz, zk)
     rc = _one(p, "elastic-recovery")
     if rc is not None and rc.recovery:
         zz = zz + rc.recovery * (0.0 - zz)
@@ -671,7 +687,117 @@ def draw(effect: str, rng) -> tuple:
             return (E.ElasticRecoveryParams(s),)
 
         return kn, lambda s: kn(s)[0].report(), 1e-3
+    if effect == "spindle-async-error":
+        return _draw_async(case, rng)
+    if effect == "tool-wear":
+        return _draw_wear(case, rng)
     raise KeyError(effect)
+
+
+@dataclasses.dataclass(frozen=True)
+class SaturatingWear(E.EffectParams):
+    """Generator form of tool wear (not the catalogue's linear growth): the nose
+    radius grows by ``A (1 - exp(-L / L0))`` with the cutting length ``L = v t``
+    (break-in wear that levels off), tip held."""
+
+    effect = "tool-wear"
+
+    growth_limit: float = 0.0  # m, A
+    length_scale: float = 1.0  # m, L0
+    speed: float = 0.0  # m/s, v
+
+    def grown(self, t):
+        t = np.maximum(np.asarray(t, dtype=float), 0.0)
+        return self.growth_limit * -np.expm1(-self.speed * t / self.length_scale)
+
+    def tool(self, tool):
+        return tool
+
+    def edge(self, phi):
+        return 0.0, None
+
+    def tool_at(self, tool, t):
+        return dataclasses.replace(tool, nose_radius=tool.nose_radius
+                                   + float(self.grown(t)))
+
+    def edge_at(self, t, phi):
+        return self.grown(t), None
+
+
+def _draw_wear(case, rng):
+    """Saturating radius growth, its length scale 0.3-2 times the cut's length."""
+    from servosurf.diagnose.effects._tool_wear import cutting_speed
+
+    v = cutting_speed(case.toolpath)
+    length = v * case.toolpath.path.duration
+    u = float(rng.uniform(0.3, 2.0))
+
+    def kn(s):
+        # s: radius growth (m) at the end of the toolpath
+        return (SaturatingWear(s / -math.expm1(-1.0 / u), u * length, v),)
+
+    return kn, lambda s: {"growth": s / length}, 1e-6
+
+
+@dataclasses.dataclass(frozen=True)
+class DriftingSines(E.EffectParams):
+    """Generator form of the asynchronous spindle error (not the catalogue's fixed
+    sine): sines whose frequency wanders slowly and whose amplitude breathes.
+
+    Line k: ``a_k (1 + m sin(2 pi t / T_m + psi_m)) cos(Phi_k(t))`` with the
+    instantaneous frequency ``f_k + df sin(2 pi t / T_d + psi_d)`` (Hz), i.e.
+    ``Phi_k = 2 pi f_k t - df T_d cos(2 pi t / T_d + psi_d) + phi_k``.
+    """
+
+    effect = "spindle-async-error"
+
+    frequencies: tuple = ()  # Hz
+    amplitudes: tuple = ()  # m
+    phases: tuple = ()  # rad
+    wander: float = 0.0  # Hz, frequency excursion df
+    wander_period: float = 3.0  # s, T_d
+    wander_phase: float = 0.0  # rad
+    breathing: float = 0.0  # amplitude modulation depth m (1)
+    breathing_period: float = 2.0  # s, T_m
+    breathing_phase: float = 0.0  # rad
+
+    def path_z(self, t, theta, r, z):
+        t = np.asarray(t, dtype=float)
+        env = 1.0 + self.breathing * np.sin(2 * np.pi * t / self.breathing_period
+                                            + self.breathing_phase)
+        wob = -self.wander * self.wander_period * np.cos(
+            2 * np.pi * t / self.wander_period + self.wander_phase)
+        out = np.zeros(t.shape)
+        for f, a, ph in zip(self.frequencies, self.amplitudes, self.phases,
+                            strict=True):
+            out = out + a * env * np.cos(2 * np.pi * f * t + wob + ph)
+        return out
+
+
+def _draw_async(case, rng):
+    """Drifting sines at non-integer spindle orders (DISCOVERY.md row 7)."""
+    fsp = case.toolpath.path.rev_per_s
+    k = int(rng.integers(1, 3))
+    fr = []
+    while len(fr) < k:
+        f = float(rng.uniform(60.0, 2000.0))
+        h = f / fsp
+        if abs(h - round(h)) > 0.15:  # a non-integer order
+            fr.append(f)
+    rel = [1.0] + [float(rng.uniform(0.2, 0.5)) for _ in fr[1:]]
+    ph = [float(v) for v in rng.uniform(-np.pi, np.pi, k)]
+    wander = float(rng.uniform(0.02, 0.15))
+    t_d = float(rng.uniform(2.0, 6.0))
+    psi_d = float(rng.uniform(-np.pi, np.pi))
+    m = float(rng.uniform(0.05, 0.2))
+    t_m = float(rng.uniform(1.5, 5.0))
+    psi_m = float(rng.uniform(-np.pi, np.pi))
+
+    def kn(s):
+        return (DriftingSines(tuple(fr), tuple(s * r for r in rel), tuple(ph),
+                              wander, t_d, psi_d, m, t_m, psi_m),)
+
+    return kn, lambda s: {"frequency_1_hz": fr[0], "amplitude_1_m": s}, 1e-9
 
 
 def steady_peak_current(case) -> float:

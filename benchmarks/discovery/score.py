@@ -137,6 +137,19 @@ def param_error(effect: str, truth: dict, est: dict, nominal: dict) -> float:
         return float("inf")
     if effect == "elastic-recovery":
         return _rel(est["recovery"], truth["recovery"])
+    if effect == "spindle-async-error":
+        # the strongest drawn line against the nearest fitted one
+        f0, a0 = truth["frequency_1_hz"], truth["amplitude_1_m"]
+        best = None
+        for k in range(1, 5):
+            f = est.get(f"frequency_{k}_hz")
+            if f is not None and (best is None or abs(f - f0) < abs(best[0] - f0)):
+                best = (f, est[f"amplitude_{k}_m"])
+        if best is None:
+            return float("inf")
+        return max(_rel(best[0], f0), _rel(best[1], a0))
+    if effect == "tool-wear":
+        return _rel(est["growth"], truth["growth"])
     return float("nan")
 
 

@@ -83,6 +83,15 @@ def _term(name: str, case, ev):
         return (E.ElasticRecoveryParams(0.002),)
     if name == "recalibration":
         return (E.RecalibrationParams(moving_mass=0.185, force_constant=7.6),)
+    if name == "spindle-async-error":
+        return (E.SpindleAsyncErrorParams(173.3, 2e-9, 0.4),
+                E.SpindleAsyncErrorParams(411.7, 1e-9, -1.0))
+    if name == "tool-wear":
+        from servosurf.diagnose.effects._tool_wear import cutting_speed
+
+        # 2 um of radius growth over the toolpath (the third ring cuts 3 s in)
+        v = cutting_speed(case.toolpath)
+        return (E.ToolWearParams(2e-6 / (v * case.toolpath.path.duration), v),)
     raise KeyError(name)
 
 

@@ -13,11 +13,13 @@ forms: a mode as a real mass on a spring at the tool holder, a true transport de
 of the held DAC output, waviness as sines, drift with another time law, a
 Lorentzian force-constant profile, a sinh-stiffening flexure, a soft-knee current
 limit, a capacitive-gap sensor law, a von Mises spindle bump, an edge (ploughing)
-force beside the chip-area force. Out-of-catalogue effects: Bouc-Wen or Dahl
-flexure hysteresis, Coulomb friction, DAC or ADC quantisation, a pickup line in
-the logged following error only, tool wear (nose radius growing with cutting
-length), asynchronous spindle axial error. Nulls: nominal noise, base vibration
-continuing below fs / 4096, noise PSDs off by a factor 1.5-2.
+force beside the chip-area force, tool wear (nose radius growing with cutting
+length, catalogue's tool-wear), asynchronous spindle axial error (non-integer
+orders plus a narrow band, catalogue's spindle-async-error). Out-of-catalogue
+effects: Bouc-Wen or Dahl flexure hysteresis, Coulomb friction, DAC or ADC
+quantisation, a pickup line in the logged following error only. Nulls: nominal
+noise, base vibration continuing below fs / 4096, noise PSDs off by a factor
+1.5-2.
 """
 
 from __future__ import annotations
@@ -488,9 +490,10 @@ def tool_wear(rng, ctx) -> Effect:
         # s: radius growth per metre of cutting length (m/m)
         return Spec(radius=lambda t: R0 + s * v * np.asarray(t, dtype=float),
                     truth={"growth_per_cut_length": s,
-                           "radius_growth_over_cut": s * v * ctx.path.duration})
+                           "radius_growth_over_cut": s * v * ctx.path.duration},
+                    comparable={"radius_growth_rate": s * v})
 
-    return Effect("tool-wear", "out-of-catalogue", (), make, 1e-4, ("map",))
+    return Effect("tool-wear", "catalogue", ("tool-wear",), make, 1e-4, ("map",))
 
 
 def async_spindle(rng, ctx) -> Effect:
@@ -524,12 +527,17 @@ def async_spindle(rng, ctx) -> Effect:
             out = out + a * np.cos(2 * math.pi * o * fsp * t + p)
         return out
 
+    k1 = int(np.argmax(amp))
+
     def make(s):
         return Spec(offset=lambda t, th: s * shape(t),
                     truth={"amplitude": s, "orders": orders,
-                           "narrow_band_hz": fb})
+                           "narrow_band_hz": fb},
+                    comparable={"frequency_1": orders[k1] * fsp,
+                                "amplitude_1": s * float(amp[k1])})
 
-    return Effect("async-spindle", "out-of-catalogue", (), make, 1e-9, ("map",))
+    return Effect("async-spindle", "catalogue", ("spindle-async-error",), make, 1e-9,
+                  ("map",))
 
 
 # ------------------------------------------------------------------ nulls
@@ -566,14 +574,14 @@ CATALOGUE_LIKE = {
     "spindle-bump": spindle_bump,
     "nose-radius": nose_radius,
     "edge-force": edge_force,
+    "tool-wear": tool_wear,
+    "async-spindle": async_spindle,
 }
 OUT_OF_CATALOGUE = {
     "flexure-hysteresis": hysteresis,
     "coulomb-friction": coulomb_friction,
     "quantisation": quantisation,
     "sensor-pickup": pickup_line,
-    "tool-wear": tool_wear,
-    "async-spindle": async_spindle,
 }
 NULLS = {
     "null-nominal": null_nominal,

@@ -113,6 +113,15 @@ BOUNDS = {
         "force_constant": (0.7 * 8.0, 1.3 * 8.0, "motor constant +-30 %"),
         "sensor_bandwidth": (5e3, 50e3, "CPL190-class electronics"),
     },
+    "spindle-async-error": {
+        "amplitude_*": (0.0, 1e-7, "asynchronous axial error motion of air-bearing "
+                        "spindles: a few nm to about 25 nm"),
+        "frequency_*": (0.0, 5e3, "below the rotor's axial mode on its bearing film"),
+    },
+    "tool-wear": {
+        "growth": (0.0, 1e-3, "wear only grows the radius; 1 mm per m of cutting "
+                   "length would wear a 0.5 mm nose away in a lenslet field"),
+    },
 }
 
 
@@ -177,6 +186,18 @@ def param_error(named: str, comp: dict, est: dict, kt0: float) -> float | None:
         return math.inf
     if named == "tool-radius-error":
         return _rel(est.get("radius_error", math.nan), comp["radius_error"])
+    if named == "spindle-async-error" and "frequency_1" in comp:
+        f0, a0 = comp["frequency_1"], comp["amplitude_1"]
+        best = None
+        for k in range(1, 10):
+            f = est.get(f"frequency_{k}", est.get(f"frequency_{k}_hz"))
+            a = est.get(f"amplitude_{k}", est.get(f"amplitude_{k}_m", math.nan))
+            if f is not None and (best is None or abs(f - f0) < abs(best[0] - f0)):
+                best = (f, a)
+        return math.inf if best is None else max(_rel(best[0], f0), _rel(best[1], a0))
+    if named == "tool-wear" and "radius_growth_rate" in comp:
+        v = est.get("cutting_speed", est.get("cutting_speed_m_per_s", math.nan))
+        return _rel(est.get("growth", math.nan) * v, comp["radius_growth_rate"])
     if named == "cutting-force-coefficient":
         return abs(est.get("specific_force", math.nan) - comp["specific_force"]) / abs(
             comp["specific_force"] - kt0)

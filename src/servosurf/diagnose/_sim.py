@@ -111,13 +111,18 @@ class CaseModel:
         """Outside-the-loop tool-height terms of ``model`` in m (None: none)."""
         return _hooks.compose_path_z(model.hooks("path_z"), t, theta, r, z)
 
-    def edge(self, model: Model, phi: np.ndarray):
+    def edge(self, model: Model, phi: np.ndarray, t: np.ndarray | None = None):
         """The tool terms of ``model`` at contact angles ``phi`` (rad): nose radius
-        change in m and outward edge deviation in m (None: none)."""
+        change in m and outward edge deviation in m (None: none). With the pass
+        times ``t`` (s), a term with an ``edge_at(t, phi)`` hook (a tool changing
+        in time, e.g. wear) is evaluated at them."""
         d_r = 0.0
         dev = None
         for h in model.hooks("tool"):
-            dr_h, w = h.edge(phi)
+            if t is not None and hasattr(h, "edge_at"):
+                dr_h, w = h.edge_at(t, phi)
+            else:
+                dr_h, w = h.edge(phi)
             d_r += dr_h
             if w is not None:
                 dev = w if dev is None else dev + w

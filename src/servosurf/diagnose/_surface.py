@@ -9,7 +9,8 @@ round-nose arc over the passes that reach it (the model of
 
 with ``t_k`` the time the tool passes the point's angle, ``dr_k`` its radial offset
 from the tool, ``R' = R + dR`` and ``W`` the nose radius change and the edge
-deviation of the model's tool terms (their pointwise ``edge`` hooks). The tool
+deviation of the model's tool terms (their pointwise ``edge`` hooks, ``edge_at``
+at the pass times for a tool that changes in time). The tool
 height ``z_tool(t) = x1(t) + d_path(t, theta)`` is the deterministic loop
 response (periodic after the start-up, extended periodically) plus the model's
 outside-the-loop ``path_z`` terms; its surface terms (``surface_heights`` hooks,
@@ -221,7 +222,7 @@ def surface_heights(
         d_r = 0.0
         if p.hooks("tool"):
             phi = np.arcsin(np.clip(dr / pts.radius, -1.0, 1.0))
-            d_r, dev = case.edge(p, phi)
+            d_r, dev = case.edge(p, phi, t)
         R = pts.radius + d_r
         arc = R - np.sqrt(np.maximum(R * R - dr * dr, 0.0))
         if dev is not None:

@@ -31,8 +31,9 @@
 
 A *hook* is any object with any of the optional methods of the protocol in
 :mod:`servosurf._hooks`: ``machine(machine) -> Machine``, ``workpiece(workpiece) ->
-Workpiece``, ``tool(tool) -> Tool``, ``path_z(t, theta, r, z) -> dz`` (m; ``z`` the
-deterministic tool height the loop delivers),
+Workpiece``, ``tool(tool) -> Tool`` (and ``tool_at(tool, t) -> Tool``, a tool
+changing in time, swept revolution by revolution), ``path_z(t, theta, r, z) -> dz``
+(m; ``z`` the deterministic tool height the loop delivers),
 ``surface(surface, context) -> Surface``, and for the FTS loop itself
 ``perturbation() -> LoopPerturbation`` (plant change under the installed
 controller), ``nonlinearity() -> dict`` (fields of
@@ -70,6 +71,7 @@ from ._common import (
     _reach,
     cutting_span,
 )
+from ._timed_tool import has_timed_tool, timed_tool_surface
 
 __all__ = ["simulate"]
 
@@ -315,8 +317,14 @@ def simulate(
 
     with _progress.stage(f"kernel on {spec.field.ny} x {spec.field.nx} grid"):
         # material parts (issue 18) switch to the time-ordered sweep
-        surface = _parts.machine_surface(path, tool, kfield, _initial(spec, workpiece),
-                                         workpiece, parts, n_threads=n_threads)
+        if has_timed_tool(hooks):  # a tool changing in time (wear): by revolution
+            surface = timed_tool_surface(
+                path, tool, kfield, _initial(spec, workpiece), workpiece, parts,
+                hooks, angular_speed=spec.path.angular_speed, n_threads=n_threads)
+        else:
+            surface = _parts.machine_surface(path, tool, kfield,
+                                             _initial(spec, workpiece), workpiece,
+                                             parts, n_threads=n_threads)
         surface = _physical(spec, surface)
 
     ctx = {

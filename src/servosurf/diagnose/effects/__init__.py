@@ -9,13 +9,14 @@ optional refinement) and its report. :mod:`._base` defines the protocol
 (:class:`EffectParams`, :class:`Effect`, :class:`Model`, :class:`Evidence`). The
 diagnosis's engine, blocks, locators and report know no effect by name.
 
-Adding an effect (the 16th)
+Adding an effect (the 18th)
 ---------------------------
 1. Write ``_my_effect.py`` next to the others: a frozen ``MyEffectParams(EffectParams)``
    with ``effect = "my-effect"``, every field declared with :func:`quantity` (unit,
    ``low``/``high`` physical bounds, ``source``), and the hook methods its physics
    needs (``perturbation``, ``nonlinearity``, ``base_lines``, ``machine``,
-   ``workpiece``, ``tool`` + ``edge``, ``path_z``, ``surface`` +
+   ``workpiece``, ``tool`` + ``edge`` (+ ``tool_at`` + ``edge_at`` for a tool
+   changing in time), ``path_z``, ``surface`` +
    ``surface_heights``); and a ``MyEffect(Effect)`` with its documentation,
    ``channels``, ``params = MyEffectParams``, ``columns``, ``start`` and ``free``
    (``configs``, ``refine`` and ``channel_bar`` when it needs them).
@@ -59,11 +60,13 @@ from ._loop_delay import LoopDelayEffect, LoopDelayParams
 from ._recalibration import RecalibrationEffect, RecalibrationParams
 from ._sensor_noise_shape import SensorNoiseShapeEffect, SensorNoiseShapeParams
 from ._sensor_nonlinearity import SensorNonlinearityEffect, SensorNonlinearityParams
+from ._spindle_async_error import SpindleAsyncErrorEffect, SpindleAsyncErrorParams
 from ._spindle_axial_error import SpindleAxialErrorEffect, SpindleAxialErrorParams
 from ._structural_mode import StructuralModeEffect, StructuralModeParams
 from ._thermal_drift import ThermalDriftEffect, ThermalDriftParams
 from ._tool_edge_waviness import ToolEdgeWavinessEffect, ToolEdgeWavinessParams
 from ._tool_radius_error import ToolRadiusErrorEffect, ToolRadiusErrorParams
+from ._tool_wear import ToolWearEffect, ToolWearParams
 
 __all__ = [
     "CATALOGUE",
@@ -95,6 +98,8 @@ __all__ = [
     "SpindleAxialErrorParams",
     "ElasticRecoveryParams",
     "RecalibrationParams",
+    "SpindleAsyncErrorParams",
+    "ToolWearParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -114,6 +119,8 @@ CATALOGUE: tuple[Effect, ...] = (
     SpindleAxialErrorEffect(),
     ElasticRecoveryEffect(),
     RecalibrationEffect(),
+    SpindleAsyncErrorEffect(),
+    ToolWearEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])
