@@ -100,3 +100,54 @@ def test_projected_periodogram_expectation_matches_monte_carlo():
     # without the projection the expectation is far off at the low bins
     e_raw = projected_periodogram_expectation(r, q[:, :0], fs)
     assert np.max(np.abs(mc[1:20] / e_raw[1:20] - 1)) > 0.5
+
+
+# ---------------------------------------------------------------- diagnoses
+def _idle_case(discovery, tmp_path, ool, seed, records=16, n=4096):
+    """An idle-only case (the benchmark generator's noise synthesis, not the
+    diagnosis's) with ``ool``'s nuisance; returns its manifest."""
+    cases = discovery("cases")
+    from servosurf.diagnose import Model
+
+    case = cases.base_case()
+    rng = np.random.default_rng(seed)
+    fe = cases.noise_records(case, Model(), n, rng, count=records, ool=ool)["fe"]
+    np.savez(tmp_path / "idle.npz", fs_hz=case.fs, following_error_m=fe)
+    tp = cases.TOOLPATH
+    (tmp_path / "m.toml").write_text(
+        f'[case]\nmachine = "seed-prototype"\ntoolpath = "{tp}"\n'
+        f"bandwidth = {cases.BANDWIDTH}\nmoving-mass = {cases.MASS}\n\n"
+        '[[recording]]\npath = "idle.npz"\nkind = "following-error"\n')
+    return tmp_path / "m.toml", fe
+
+
+@pytest.mark.slow  # a diagnosis of 16 idle records: ~20 s alone, more when loaded
+def test_low_band_base_null_is_consistent(discovery, tmp_path):
+    from servosurf.diagnose import diagnose
+
+    ool = {"kind": "low-band", "par": [4.0]}
+    man, fe = _idle_case(discovery, tmp_path, ool, seed=11)
+    # the low-band content is there: drifts of a fifth of the records' RMS
+    t = np.arange(fe.shape[1])
+    slope = np.polyfit(t, fe.T, 1)[0] * t.size
+    assert np.median(np.abs(slope)) > 0.1 * np.median(np.std(fe, axis=1))
+    d = diagnose(man)
+    assert d.verdict == "consistent", (d.verdict, d.explanations, d.recalibration)
+
+
+@pytest.mark.slow  # a diagnosis of 16 idle records with a noise term fitted
+def test_twice_the_base_noise_is_a_recalibration_not_unexplained(discovery,
+                                                                 tmp_path):
+    from servosurf.diagnose import diagnose
+
+    ool = {"kind": "noise-scale", "par": [2.0, 2.25, 1.0]}  # base x2, sensor x1.5
+    man, _ = _idle_case(discovery, tmp_path, ool, seed=12)
+    d = diagnose(man)
+    assert d.verdict != "unexplained", (d.verdict, d.recalibration)
+    # no mechanism named: at most the catalogue's noise-model term or the
+    # noise-level recalibration
+    named = {e["effect"] for e in d.explanations}
+    assert named <= {"sensor-noise-shape"}, named
+    for rec in d.recalibration:
+        par = rec["parameters"]
+        assert all(k.endswith("noise_scale") for k in par), par

@@ -76,7 +76,7 @@ class RecalibrationParams(EffectParams):
         "of a multi-pole filter shifts the effective corner")
 
     base_noise_scale: float | None = quantity(
-        None, unit="", doc="factor on the base-vibration PSD of the machine file",
+        None, unit="1", doc="factor on the base-vibration PSD of the machine file",
         low=NOISE_SCALE[0], high=NOISE_SCALE[1],
         source="0.25-4 x in power (a factor 2 in amplitude): a disturbance PSD "
         "calibrated once (a Welch estimate of a few records, an accelerometer on "
@@ -84,7 +84,7 @@ class RecalibrationParams(EffectParams):
         "factor of that order; issue 19 item 5 names 2 x base and 1.5 x sensor "
         "noise as recalibrations, not physics")
     sensor_noise_scale: float | None = quantity(
-        None, unit="", doc="factor on the sensor-noise PSD of the machine file",
+        None, unit="1", doc="factor on the sensor-noise PSD of the machine file",
         low=NOISE_SCALE[0], high=NOISE_SCALE[1],
         source="0.25-4 x in power, as the base-vibration factor (the sensor's "
         "noise density is calibrated once; gain settings and cabling move it); "
