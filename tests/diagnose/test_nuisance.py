@@ -151,3 +151,50 @@ def test_twice_the_base_noise_is_a_recalibration_not_unexplained(discovery,
     for rec in d.recalibration:
         par = rec["parameters"]
         assert all(k.endswith("noise_scale") for k in par), par
+
+
+# ------------------------------------------------------ noise-level recalibration
+def test_noise_level_recalibration_scales_the_psds():
+    from servosurf.diagnose import effects as E
+    from servosurf.noise import evaluate_psd
+    from servosurf.servo import load_machine
+
+    m = load_machine()
+    f = np.geomspace(50.0, 90e3, 40)
+    q = E.RecalibrationParams(base_noise_scale=2.0, sensor_noise_scale=2.25)
+    d0, d1 = m.disturbances, q.machine(m).disturbances
+    np.testing.assert_allclose(evaluate_psd(d1.base_vibration, f),
+                               2.0 * evaluate_psd(d0.base_vibration, f), rtol=1e-12)
+    np.testing.assert_allclose(evaluate_psd(d1.sensor_noise, f),
+                               2.25 * evaluate_psd(d0.sensor_noise, f), rtol=1e-12)
+    np.testing.assert_allclose(evaluate_psd(d1.current_noise, f),
+                               evaluate_psd(d0.current_noise, f), rtol=0)
+    assert q.noise_only()
+    assert not E.RecalibrationParams(moving_mass=0.18).noise_only()
+
+
+def test_noise_level_config_fits_only_the_factors():
+    from servosurf.diagnose import Model
+    from servosurf.diagnose.effects import get_effect
+    from servosurf.diagnose.effects._base import Config
+
+    eff = get_effect("recalibration")
+    assert {c.label for c in eff.configs(None, Model())} == {"plant", "noise-level"}
+    cfg = Config("noise-level")
+    assert eff.n_params(cfg) == 2
+    p = eff.start(Model(), cfg, [10.0, 5.0], None)  # 1 + 0.1 c
+    (q,) = p.get("recalibration")
+    assert q.noise_only()
+    assert q.base_noise_scale == pytest.approx(2.0)
+    assert q.sensor_noise_scale == pytest.approx(1.5)
+    free = eff.free(p, 0, None)
+    assert {x.field for x in free} == {"base_noise_scale", "sensor_noise_scale"}
+    assert all((x.lo, x.hi) == (0.25, 4.0) for x in free)
+
+
+def test_verdict_of_a_noise_level_recalibration():
+    from servosurf.diagnose._diagnose import _verdict
+
+    assert _verdict(False, True, [], 1e3, 0.0, noise_only=True) == "consistent"
+    assert _verdict(False, True, [], 1e3, 0.0, noise_only=False) == "unexplained"
+    assert _verdict(False, False, [], 0.0, 0.0) == "consistent"
