@@ -226,6 +226,10 @@ def noise_records(
                 spec[o][band] += ps[(inp[name], o)] * x
         for o in outputs:
             out[o][c] = np.fft.irfft(spec[o], n)
+        if ool and ool["kind"] == "low-band":
+            low = low_band_records(case, p, n, rng, ool["par"][0], outputs)
+            for o in outputs:
+                out[o][c] += low[o]
         lf, la = _lines(p)
         if len(lf):
             f0 = np.asarray(lf)
@@ -239,6 +243,41 @@ def noise_records(
                         * abs(hh)
                         * np.cos(2 * np.pi * f0[j] * t + ph + np.angle(hh))
                     )
+    return out
+
+
+#: A low-band record is cut from a series this many times longer (its content
+#: down to 1 / (8 T): offsets and drifts as well as slow oscillation).
+LOW_BAND_SPAN = 8
+
+
+def low_band_records(case: CaseModel, p: Model, n: int, rng, slope: float,
+                     outputs=("fe",)) -> dict:
+    """Base vibration below the compared band (realistic null, issue 19 item 5).
+
+    The base PSD continues below ``fs / 4096`` as ``W(f_lo) (f / f_lo)^-slope``
+    down to ``fs / (LOW_BAND_SPAN n)``; a Gaussian series of
+    ``LOW_BAND_SPAN n`` samples with that spectrum goes through the true loop's
+    base path and its first ``n`` samples are returned (not periodic in the
+    record: it leaks into every bin of a rectangular window).
+    """
+    fs = case.fs
+    m = LOW_BAND_SPAN * n
+    f = np.fft.rfftfreq(m, 1.0 / fs)
+    f_lo = fs / 4096
+    band = (f > 0) & (f < f_lo * (1 - 1e-9))
+    fb = f[band]
+    w_lo = case.disturbance_psds(p, np.array([f_lo]))["base"][0]
+    wk = w_lo * (fb / f_lo) ** (-float(slope))
+    ps = case.paths(p, fb)
+    g = rng.standard_normal(fb.size) + 1j * rng.standard_normal(fb.size)
+    g = g / math.sqrt(2.0)
+    x = np.sqrt(wk * m * fs / 2.0) * g
+    out = {}
+    for o in outputs:
+        spec = np.zeros(f.size, dtype=complex)
+        spec[band] = ps[("base", o)] * x
+        out[o] = np.fft.irfft(spec, m)[:n]
     return out
 
 
@@ -1022,6 +1061,11 @@ def build(spec: dict, campaign: dict):
         ool_make = {"kind": "noise-scale", "par": par}
         achieved["noise-scale"] = enr(base_case(), Model(), ool_make, campaign,
                                       nominal_recordings(campaign))
+    if spec.get("low_band"):
+        # realistic null: the base PSD continuing below the compared band
+        ool_make = {"kind": "low-band", "par": [float(spec["low_band"])]}
+        achieved["low-band"] = enr(base_case(), Model(), ool_make, campaign,
+                                   nominal_recordings(campaign))
     if spec.get("ool"):
         (om, okn, _s0), s, e = _scaled(
             spec["enr"],

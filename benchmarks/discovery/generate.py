@@ -156,6 +156,8 @@ def make_one(args) -> dict:
         "enr": spec["enr"],
         "enr_achieved": achieved,
         "noise_scale": spec.get("noise_scale"),
+        "low_band": spec.get("low_band"),
+        "null": spec.get("null"),
         "seed": spec["seed"],
         "truth": truth,
         "campaign": campaign_name,
@@ -212,6 +214,10 @@ def generate_specs(
         }
         if sp.get("noise_scale"):
             s["noise_scale"] = [float(c) for c in sp["noise_scale"]]
+        if sp.get("low_band"):
+            s["low_band"] = float(sp["low_band"])
+        if sp.get("null"):
+            s["null"] = sp["null"]
         full.append(s)
     work = [(s, campaign, str(out)) for s in full]
     if jobs > 1:
@@ -223,6 +229,24 @@ def generate_specs(
     return key
 
 
+#: Realistic null kinds (issue 19 items 5 and 9): no effect, only what a real
+#: machine's records hold besides the machine file's noise.
+REALISTIC_NULLS = {
+    "nominal": {},
+    "low-band base (f^-4 below fs/4096)": {"low_band": 4.0},
+    "noise factor (base x2, sensor x1.5)": {"noise_scale": (2.0, 1.5, 1.0)},
+}
+
+
+def realistic_null_specs(k: int) -> list[dict]:
+    """``k`` null specs of each kind of :data:`REALISTIC_NULLS` (kinds interleaved)."""
+    return [
+        {"effects": [], "ool": None, "enr": 0.0, "null": name, **extra}
+        for _ in range(k)
+        for name, extra in REALISTIC_NULLS.items()
+    ]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", help="output folder")
@@ -230,7 +254,16 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1, help="suite seed")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes")
     ap.add_argument("--limit", type=int, help="only the first N cases")
+    ap.add_argument("--realistic-nulls", type=int, metavar="K",
+                    help="instead of the suite: K null cases of each realistic kind "
+                    "(nominal, low-band base, noise factor) on the test campaign")
     a = ap.parse_args(argv)
+    if a.realistic_nulls:
+        key = generate_specs(Path(a.out), realistic_null_specs(a.realistic_nulls),
+                             campaign="test", seed=a.seed, jobs=a.jobs)
+        print(f"{len(key)} null cases in {a.out}/cases; key sealed in "
+              f"{a.out}/key.sealed")
+        return 0
     key = generate(Path(a.out), quick=a.quick, seed=a.seed, jobs=a.jobs, limit=a.limit)
     print(f"{len(key)} cases in {a.out}/cases; key sealed in {a.out}/key.sealed")
     return 0

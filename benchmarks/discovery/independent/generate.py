@@ -296,13 +296,22 @@ def _work(args):
                 "generation_error": f"{type(exc).__name__}: {exc}"}
 
 
+def null_suite(k: int) -> list[dict]:
+    """``k`` cases of each null kind (:data:`effects.NULLS`: nominal noise, base
+    vibration below fs / 4096, a noise PSD off by 1.5-2x), kinds interleaved."""
+    return [{"effect": name, "enr": 0.0} for _ in range(k) for name in E.NULLS]
+
+
 def generate(out: Path, *, seed: int, n_cases: int, jobs: int = 1,
              chip_force: str = "continuous", enrs: tuple = ENRS,
-             progress=print) -> dict:
-    """Generate the suite into ``out`` and seal its key; returns the (plain) key."""
+             progress=print, nulls: int = 0) -> dict:
+    """Generate the suite into ``out`` and seal its key; returns the (plain) key.
+
+    With ``nulls`` > 0, only ``nulls`` cases of each null kind (:func:`null_suite`).
+    """
     out = Path(out)
     (out / "cases").mkdir(parents=True, exist_ok=True)
-    specs = suite(n_cases, seed, enrs)
+    specs = null_suite(nulls) if nulls > 0 else suite(n_cases, seed, enrs)
     rng = np.random.default_rng(seed + 17)
     numbers = rng.permutation(len(specs)) + 1
     hold = chip_force == "held"
@@ -360,10 +369,16 @@ def main(argv=None) -> int:
     ap.add_argument("--enrs", type=_enr_list, default=ENRS,
                     help="target ENRs of the catalogue-like effects, comma "
                     "separated (default 0.1,0.3; '0.3' gives a 24-case suite)")
+    ap.add_argument("--nulls", type=int, default=0, metavar="K",
+                    help="instead of the suite: K cases of each null kind "
+                    "(nominal, low-frequency base, misspecified noise)")
     a = ap.parse_args(argv)
+    if a.nulls < 0:
+        print(f"error: --nulls {a.nulls}: must be 0 or more", file=sys.stderr)
+        return 1
     t0 = time.perf_counter()
     key = generate(a.out, seed=a.seed, n_cases=a.n_cases, jobs=a.jobs,
-                   chip_force=a.chip_force, enrs=a.enrs)
+                   chip_force=a.chip_force, enrs=a.enrs, nulls=a.nulls)
     bad = sum(1 for c in key["cases"] if "generation_error" in c)
     print(f"{len(key['cases'])} cases ({bad} not generated) in "
           f"{time.perf_counter() - t0:.0f} s -> {a.out}")

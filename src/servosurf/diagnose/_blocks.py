@@ -23,6 +23,7 @@ term so that accepted lines, modes and noise shapes enter the weighting):
 
 from __future__ import annotations
 
+import functools as _functools
 import math
 
 import numpy as np
@@ -394,7 +395,8 @@ class SpectralBlock(Block):
         f = np.fft.rfftfreq(n, 1.0 / fs)
         keep = _band_mask(f, fs, ctx.case)
         self.freq = f[keep]
-        x = np.fft.rfft(fe - fe.mean(axis=1, keepdims=True), axis=1)[:, keep]
+        self.basis = record_basis(ctx.case, n, fs)  # low-band nuisance, out
+        x = np.fft.rfft(project_low_band(fe, self.basis), axis=1)[:, keep]
         self.pbar = np.mean(np.abs(x) ** 2, axis=0) * 2.0 / (fs * n)
         self.spec_records = np.abs(x) ** 2 * 2.0 / (fs * n)
         super().__init__(
@@ -410,7 +412,8 @@ class SpectralBlock(Block):
         """Expected periodogram (m^2/Hz) at the block's bins under ``p``."""
 
         def run():
-            s = expected_periodogram(self.ctx.case, p, self.freq, self.nsamp, self.fs)
+            s = expected_projected_periodogram(
+                self.ctx.case, p, self.freq, self.nsamp, self.fs, self.basis)
             return s + line_power(self.ctx.case, p, self.freq, self.nsamp, self.fs)
 
         return self.ctx.memo((p.key(self.groups), "spec", self.recording), run)
@@ -492,14 +495,17 @@ class TimeBlock(Block):
         self.fs = fs
         self.records = records
         self.meta = []
+        self.bases = []
         tot = 0
         for rec in records:
             n = rec["fe"].size
             f = np.fft.rfftfreq(n, 1.0 / fs)
             keep = _band_mask(f, fs, ctx.case)
-            w = _whiten_weights(ctx, p_noise, f[keep], n, fs)
+            q = record_basis(ctx.case, n, fs)  # low-band nuisance, projected out
+            w = _projected_whiten_weights(ctx, p_noise, f[keep], n, fs, q)
             self.meta.append((keep, w, f[keep]))
-            tot += 2 * int(keep.sum())
+            self.bases.append(q)
+            tot += 2 * int(keep.sum()) - _in_band_dof(q, keep)
         super().__init__(recording=name, kind="following-error", domain="time", n=tot)
 
     groups = ("perturbation", "nonlinearity", "base_lines")
@@ -543,7 +549,8 @@ class TimeBlock(Block):
     def whitened(self, p: Model, i: int) -> np.ndarray:
         """Whitened residual spectrum of record i (complex, lines projected out)."""
         keep, w, _ = self.meta[i]
-        x = np.fft.rfft(self.residual_time(p, i))[keep] * w
+        q = self.bases[i]
+        x = np.fft.rfft(project_low_band(self.residual_time(p, i), q))[keep] * w
         lines = self.ctx.case.base_lines(p)
         if lines:
             n = self.records[i]["fe"].size
@@ -552,7 +559,8 @@ class TimeBlock(Block):
             for f0, _ in lines:
                 pair = []
                 for fn in (np.cos, np.sin):
-                    c = np.fft.rfft(fn(2 * np.pi * f0 * t))[keep] * w
+                    c = np.fft.rfft(project_low_band(fn(2 * np.pi * f0 * t), q))[
+                        keep] * w
                     pair.append(np.concatenate([c.real, c.imag]))
                 cols.append(tuple(pair))
             v = _remove_lines(
@@ -1290,3 +1298,181 @@ class PointsBlock(Block):
             x = np.column_stack([x] + cols)
         coef, *_ = np.linalg.lstsq(self._whiten(x), self._whiten(r), rcond=None)
         return r - x @ coef
+
+
+# ------------------------------------------------------------------------------
+# Low-band nuisance (issue 19 item 5): content below the compared band
+# ------------------------------------------------------------------------------
+#: Eigenvalue (energy concentration in ``[-W, W]``) a Slepian sequence must reach
+#: to enter the low-band basis: the well-concentrated ones (about ``2 N W - 1``).
+SLEPIAN_CONCENTRATION = 0.9
+
+
+def low_band_basis(n: int, fs: float, w: float) -> np.ndarray:
+    """Orthonormal basis of the low-band nuisance of an ``n``-sample record.
+
+    Columns: an offset, a linear trend, and the discrete prolate spheroidal
+    (Slepian) sequences of half-bandwidth ``w`` whose energy concentration in
+    ``[-w, w]`` is at least :data:`SLEPIAN_CONCENTRATION` (Slepian 1978; about
+    ``2 n w / fs - 1`` of them, none for a record shorter than ``fs / w``),
+    orthonormalised (thin QR). Projecting them out removes what a record holds
+    below ``w`` -- the base vibration's PSD continuing below the compared band,
+    offsets, drifts -- while removing from any bin above ``w`` at most its
+    share ``1 - lambda`` of the sequences' energy.
+
+    The Slepian sequences are the leading eigenvectors of the prolate matrix
+    ``sin(2 pi w' (i - j)) / (pi (i - j))`` (``w' = w / fs``), found by subspace
+    iteration from the Fourier vectors below ``w`` (Toeplitz products by FFT,
+    ``O(n log n)``; LAPACK's tridiagonal route takes tens of seconds at 40 000
+    samples) and a Rayleigh-Ritz step. Data and model are projected with the same
+    basis, so the diagnosis does not depend on the iteration's last digits.
+    Memoised on ``(n, fs, w)``.
+
+    Parameters
+    ----------
+    n : int
+        Record length in samples.
+    fs : float
+        Sampling rate in Hz.
+    w : float
+        Half-bandwidth in Hz (the diagnosis uses the compared band's lower
+        edge, ``case.fs / 4096``).
+
+    Returns
+    -------
+    ndarray of shape (n, m)
+        Orthonormal columns (``Q.T @ Q = I``), dimensionless. Read-only.
+    """
+    return _low_band_basis(int(n), float(fs), float(w))
+
+
+#: Subspace iterations of :func:`low_band_basis` from the Fourier start (the kept
+#: span needs only to be separated from the poorly concentrated sequences).
+SLEPIAN_ITERATIONS = 4
+
+
+@_functools.lru_cache(maxsize=64)
+def _low_band_basis(n: int, fs: float, w: float) -> np.ndarray:
+    t = np.arange(n, dtype=float)
+    cols = [np.ones(n), t - t.mean()] if n > 1 else [np.ones(n)]
+    nw = n * w / fs
+    if int(math.floor(2.0 * nw)) >= 1 and n > 2:
+        wn = w / fs
+        m = np.arange(1, n, dtype=float)
+        col = np.concatenate([[2.0 * wn], np.sin(2 * np.pi * wn * m) / (np.pi * m)])
+        # symmetric Toeplitz product by a circulant embedding of size 2n
+        spec = np.fft.rfft(np.concatenate([col, [0.0], col[:0:-1]]))
+
+        def prolate(y):
+            return np.fft.irfft(spec[:, None] * np.fft.rfft(y, 2 * n, axis=0),
+                                2 * n, axis=0)[:n]
+
+        kk = np.arange(int(math.ceil(nw)) + 4)
+        ph = 2 * np.pi * np.outer(t, kk) / n
+        y = np.column_stack([np.cos(ph), np.sin(ph[:, 1:])])
+        for _ in range(SLEPIAN_ITERATIONS):
+            y = prolate(np.linalg.qr(y)[0])
+        y = np.linalg.qr(y)[0]
+        lam, v = np.linalg.eigh(y.T @ prolate(y))
+        tapers = y @ v
+        cols += [tapers[:, j] for j in range(lam.size)
+                 if lam[j] >= SLEPIAN_CONCENTRATION]
+    a = np.column_stack(cols)
+    q, r = np.linalg.qr(a)
+    keep = np.abs(np.diag(r)) > 1e-9 * max(1.0, float(np.abs(r[0, 0])))
+    q = np.ascontiguousarray(q[:, keep])
+    q.setflags(write=False)
+    return q
+
+
+def project_low_band(x: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """``x`` (last axis: samples) with the span of ``basis`` projected out."""
+    x = np.asarray(x, dtype=float)
+    return x - (x @ basis) @ basis.T
+
+
+def projected_periodogram_expectation(
+    r: np.ndarray, basis: np.ndarray, fs: float
+) -> np.ndarray:
+    """Expected one-sided periodogram of a projected stationary record.
+
+    For a zero-mean record ``x`` of ``n`` samples with autocovariance ``r[tau]``
+    (``tau = 0..n-1``, units^2) and ``y = (I - Q Q^T) x``, bin k of the
+    rectangular-window periodogram ``2 |Y_k|^2 / (fs n)`` has the expectation
+    ``2 / (fs n) a_k^H (I - P) R (I - P) a_k`` (``P = Q Q^T``, ``R`` the Toeplitz
+    covariance, ``a_k = exp(2 pi i k t / n)``), computed exactly as
+    ``a^H R a - 2 Re(a^H Q Q^T R a) + a^H Q (Q^T R Q) Q^T a`` with FFTs.
+
+    Returns
+    -------
+    ndarray of shape (n // 2 + 1,)
+        Expectation in units^2/Hz at bins ``k fs / n``.
+    """
+    from scipy.linalg import matmul_toeplitz
+
+    r = np.asarray(r, dtype=float)
+    n = r.size
+    tau = np.arange(n)
+    c = (n - tau) * r
+    e0 = 2.0 * np.real(np.fft.fft(c)) - c[0]  # a^H R a
+    if basis.shape[1]:
+        rq = matmul_toeplitz(r, basis)
+        if rq.ndim == 1:
+            rq = rq[:, None]
+        qh = np.fft.fft(basis, axis=0)  # a^H Q
+        rqh = np.fft.fft(rq, axis=0)  # a^H R Q
+        g = basis.T @ rq
+        cross = np.real(np.sum(qh * np.conj(rqh), axis=1))
+        quad = np.real(np.einsum("ki,ij,kj->k", qh, g, np.conj(qh)))
+        e0 = e0 - 2.0 * cross + quad
+    return e0[: n // 2 + 1] * 2.0 / (fs * n)
+
+
+def sampled_autocov(
+    case: CaseModel, p: Model, n: int, fs: float, output: str = "fe"
+) -> np.ndarray:
+    """Autocovariance (m^2, lags ``0..n-1``) of ``output``'s noise sampled at ``fs``
+    (the model PSD on a grid :data:`LEAKAGE_OVERSAMPLING` times finer than the
+    bins, as :func:`expected_periodogram`)."""
+    m = LEAKAGE_OVERSAMPLING * n
+    fg = np.fft.rfftfreq(m, 1.0 / fs)
+    sg = np.zeros(fg.shape)
+    on = fg > 0
+    sg[on] = case.noise_psd(p, fg[on], output)
+    return (fs * np.fft.irfft(0.5 * sg, m))[:n]
+
+
+def record_basis(case: CaseModel, n: int, fs: float) -> np.ndarray:
+    """:func:`low_band_basis` of an ``n``-sample record at ``fs`` for ``case``
+    (half-bandwidth: the compared band's lower edge)."""
+    return low_band_basis(n, fs, analysis_band(fs, case)[0])
+
+
+def expected_projected_periodogram(
+    case: CaseModel, p: Model, freq: np.ndarray, n: int, fs: float,
+    basis: np.ndarray, output: str = "fe",
+) -> np.ndarray:
+    """:func:`expected_periodogram` of records with ``basis`` projected out
+    (m^2/Hz at ``freq``, bins of the n-sample record). Records at another rate than
+    the controller's keep the PSD at the bins (no autocovariance of the model there)."""
+    freq = np.asarray(freq, dtype=float)
+    if not same_rate(fs, case):
+        return case.noise_psd(p, freq, output)
+    e = projected_periodogram_expectation(
+        sampled_autocov(case, p, n, fs, output), basis, fs)
+    return e[np.rint(freq * n / fs).astype(int)]
+
+
+def _projected_whiten_weights(ctx, p, freq, n, fs, basis):
+    """:func:`_whiten_weights` of records with ``basis`` projected out."""
+    s = expected_projected_periodogram(ctx.case, p, freq, n, fs, basis)
+    return 1.0 / np.sqrt(np.maximum(s, 1e-300) * n * fs / 4.0)
+
+
+def _in_band_dof(basis: np.ndarray, keep: np.ndarray) -> int:
+    """Degrees of freedom the projection takes from the compared bins ``keep``:
+    the basis's energy there, ``sum_j 2 / n sum_{k in keep} |Q_jk|^2`` (real and
+    imaginary parts; exact for white noise), rounded."""
+    n = basis.shape[0]
+    qh = np.fft.rfft(basis, axis=0)[keep]
+    return int(round(2.0 / n * float(np.sum(np.abs(qh) ** 2))))

@@ -330,7 +330,7 @@ def _significant(rem: list) -> list:
 
 
 def _verdict(phys: bool, recal: bool, rem: list, explained: float,
-             left: float) -> str:
+             left: float, noise_only: bool = False) -> str:
     """The verdict from what was selected and what is left.
 
     Parameters
@@ -342,6 +342,11 @@ def _verdict(phys: bool, recal: bool, rem: list, explained: float,
         :data:`VERDICT_SIGNIFICANCE` count.
     explained, left : float
         Deviance explained by the terms and deviance-equivalent left.
+    noise_only : bool
+        Whether the recalibration terms only rescale noise PSDs (base vibration,
+        sensor noise): a noise model off by a factor is a recalibration of the
+        machine file, not a mismatch (issue 19 item 5), so with nothing left the
+        case is "consistent" (the factors are reported under ``recalibration``).
 
     Returns
     -------
@@ -352,7 +357,9 @@ def _verdict(phys: bool, recal: bool, rem: list, explained: float,
     if not phys:
         # recalibration alone is not an explanation by the catalogue of physics:
         # report it, but call the mismatch unexplained
-        return "unexplained" if (remainder or recal) else "consistent"
+        if remainder:
+            return "unexplained"
+        return "unexplained" if (recal and not noise_only) else "consistent"
     if not remainder:
         return "explained"
     share = explained / (explained + left) if explained + left > 0 else 0.0
@@ -496,7 +503,9 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
     recal_d = [_term_dict(t, p, ev, fb, fa) for t in recal]
     remainder = bool(rem_v)
     tentative: list = []
-    verdict = _verdict(bool(phys), bool(recal), rem, explained, left)
+    noise_only = all(getattr(q, "noise_only", lambda: False)()  # noise levels only
+                     for t in recal for q in p.get(t.effect.name))
+    verdict = _verdict(bool(phys), bool(recal), rem, explained, left, noise_only)
     if verdict == "unexplained" and phys:
         tentative, expl = expl, []
     # refused candidates, most promising first (not those of an effect accepted
