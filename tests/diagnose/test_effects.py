@@ -83,6 +83,9 @@ def _term(name: str, case, ev):
         return (E.ElasticRecoveryParams(0.002),)
     if name == "recalibration":
         return (E.RecalibrationParams(moving_mass=0.185, force_constant=7.6),)
+    if name == "flexure-hysteresis":
+        return (E.FlexureHysteresisParams(0.05 * ev.nominal.flexure_stiffness,
+                                          0.2 * ev.stroke),)
     raise KeyError(name)
 
 

@@ -50,6 +50,7 @@ from ._cutting_force_coefficient import (
     CuttingForceCoefficientParams,
 )
 from ._elastic_recovery import ElasticRecoveryEffect, ElasticRecoveryParams
+from ._flexure_hysteresis import FlexureHysteresisEffect, FlexureHysteresisParams
 from ._flexure_nonlinearity import FlexureNonlinearityEffect, FlexureNonlinearityParams
 from ._force_constant_position import (
     ForceConstantPositionEffect,
@@ -95,6 +96,7 @@ __all__ = [
     "SpindleAxialErrorParams",
     "ElasticRecoveryParams",
     "RecalibrationParams",
+    "FlexureHysteresisParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -114,6 +116,7 @@ CATALOGUE: tuple[Effect, ...] = (
     SpindleAxialErrorEffect(),
     ElasticRecoveryEffect(),
     RecalibrationEffect(),
+    FlexureHysteresisEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])
