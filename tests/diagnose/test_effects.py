@@ -86,6 +86,8 @@ def _term(name: str, case, ev):
     if name == "flexure-hysteresis":
         return (E.FlexureHysteresisParams(0.05 * ev.nominal.flexure_stiffness,
                                           0.2 * ev.stroke),)
+    if name == "friction":
+        return (E.FrictionParams(0.02, 1e-5),)
     raise KeyError(name)
 
 

@@ -56,6 +56,7 @@ from ._force_constant_position import (
     ForceConstantPositionEffect,
     ForceConstantPositionParams,
 )
+from ._friction import FrictionEffect, FrictionParams
 from ._loop_delay import LoopDelayEffect, LoopDelayParams
 from ._recalibration import RecalibrationEffect, RecalibrationParams
 from ._sensor_noise_shape import SensorNoiseShapeEffect, SensorNoiseShapeParams
@@ -97,6 +98,7 @@ __all__ = [
     "ElasticRecoveryParams",
     "RecalibrationParams",
     "FlexureHysteresisParams",
+    "FrictionParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -117,6 +119,7 @@ CATALOGUE: tuple[Effect, ...] = (
     ElasticRecoveryEffect(),
     RecalibrationEffect(),
     FlexureHysteresisEffect(),
+    FrictionEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])
