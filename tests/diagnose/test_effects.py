@@ -226,7 +226,7 @@ def test_report_keys_are_the_fields_with_units(name, small):
               "rad": "rad", "m/s": "m_per_s", "m/N": "m_per_n", "N/m": "n_per_m",
               "N/m^2": "n_per_m2", "N/m^3": "n_per_m3", "N s/m": "n_s_per_m",
               "N/A": "n_per_a", "1/m": "per_m", "1/m^2": "per_m2",
-              "m/sqrt(Hz)": "m_per_sqrt_hz"}
+              "m/sqrt(Hz)": "m_per_sqrt_hz", "N": "n", "V": "v"}
     for slot in range(eff.slots(m)):
         q = eff.term(m, slot)
         rep = eff.report(m, slot)
