@@ -88,6 +88,9 @@ def _term(name: str, case, ev):
                                           0.2 * ev.stroke),)
     if name == "friction":
         return (E.FrictionParams(0.02, 1e-5),)
+    if name == "converter-quantisation":
+        return (E.ConverterQuantisationParams(dac_step=3e-4, adc_step=2e-9,
+                                              dead_band=2e-4),)
     raise KeyError(name)
 
 

@@ -45,6 +45,10 @@ from ._base import (
     unit_suffix,
 )
 from ._base_lines import BaseLineParams, BaseLinesEffect
+from ._converter_quantisation import (
+    ConverterQuantisationEffect,
+    ConverterQuantisationParams,
+)
 from ._cutting_force_coefficient import (
     CuttingForceCoefficientEffect,
     CuttingForceCoefficientParams,
@@ -99,6 +103,7 @@ __all__ = [
     "RecalibrationParams",
     "FlexureHysteresisParams",
     "FrictionParams",
+    "ConverterQuantisationParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -120,6 +125,7 @@ CATALOGUE: tuple[Effect, ...] = (
     RecalibrationEffect(),
     FlexureHysteresisEffect(),
     FrictionEffect(),
+    ConverterQuantisationEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])
