@@ -91,6 +91,8 @@ def _term(name: str, case, ev):
     if name == "converter-quantisation":
         return (E.ConverterQuantisationParams(dac_step=3e-4, adc_step=2e-9,
                                               dead_band=2e-4),)
+    if name == "sensor-pickup-lines":
+        return (E.SensorPickupParams(150.0, 2e-9), E.SensorPickupParams(2330.0, 1e-9))
     raise KeyError(name)
 
 

@@ -65,6 +65,7 @@ from ._loop_delay import LoopDelayEffect, LoopDelayParams
 from ._recalibration import RecalibrationEffect, RecalibrationParams
 from ._sensor_noise_shape import SensorNoiseShapeEffect, SensorNoiseShapeParams
 from ._sensor_nonlinearity import SensorNonlinearityEffect, SensorNonlinearityParams
+from ._sensor_pickup_lines import SensorPickupLinesEffect, SensorPickupParams
 from ._spindle_axial_error import SpindleAxialErrorEffect, SpindleAxialErrorParams
 from ._structural_mode import StructuralModeEffect, StructuralModeParams
 from ._thermal_drift import ThermalDriftEffect, ThermalDriftParams
@@ -104,6 +105,7 @@ __all__ = [
     "FlexureHysteresisParams",
     "FrictionParams",
     "ConverterQuantisationParams",
+    "SensorPickupParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -126,6 +128,7 @@ CATALOGUE: tuple[Effect, ...] = (
     FlexureHysteresisEffect(),
     FrictionEffect(),
     ConverterQuantisationEffect(),
+    SensorPickupLinesEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])
