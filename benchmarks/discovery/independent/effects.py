@@ -42,8 +42,9 @@ class Spec:
         Effects inside the loop.
     lines : tuple of (f Hz, amplitude m)
         Base-vibration lines (phase random per record).
-    pickup : tuple of (f Hz, amplitude m)
-        Lines added to the logged following error only.
+    pickup : tuple of (f Hz, amplitude m) or (f, amplitude, beta rad, f_d Hz)
+        Lines added to the logged following error only (with a phase drifting
+        as ``beta sin(2 pi f_d t)``).
     offset : callable or None
         ``offset(t, theta)``: tool-to-work height outside the loop, m.
     radius : callable or None
@@ -532,6 +533,101 @@ def async_spindle(rng, ctx) -> Effect:
     return Effect("async-spindle", "out-of-catalogue", (), make, 1e-9, ("map",))
 
 
+# ------------------------------------------------------------------ loop effects
+# forms unlike the catalogue's loop modules (flexure-hysteresis: Bouc-Wen;
+# friction: tanh Coulomb; converter-quantisation: rounding steps as additive
+# noise, a hard dead band; sensor-pickup-lines: fixed-phase sinusoids)
+def dahl_hysteresis(rng, ctx) -> Effect:
+    """Flexure hysteresis generated with the Dahl model (the catalogue fits
+    Bouc-Wen): ``F' = sigma v (1 - F sgn(v) / F_c)``."""
+    zy = float(rng.uniform(0.5e-6, 3e-6))
+    k2 = ctx.mach.k[1]
+
+    def make(s):
+        fc = s * k2 * zy
+        sigma = fc / zy
+
+        def ode(d, v, z):
+            sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
+            return z, sigma * v * (1 - z * sg / fc)
+
+        kd = _describing_hysteresis(ode, FRF_AMPLITUDE)
+        return Spec(loop=LoopEffects(hyst=2, h_k=sigma, h_a=fc),
+                    flex_dyn=lambda f: np.full(np.shape(f), kd),
+                    truth={"stiffness": sigma, "saturation_force": fc},
+                    comparable={"stiffness": sigma, "yield_displacement": zy})
+
+    return Effect("dahl-hysteresis", "catalogue", ("flexure-hysteresis",), make,
+                  0.02, ("fe", "frf", "map", "cut"), form="dahl")
+
+
+def lugre_friction(rng, ctx) -> Effect:
+    """Friction generated with the LuGre bristle model and a Stribeck peak (the
+    catalogue fits a tanh Coulomb law): ``F = sigma0 z``, ``z' = v - sigma0 |v| z /
+    g(v)``, ``g = F_c + (F_s - F_c) exp(-(v / v_s)^2)``."""
+    ratio = float(rng.uniform(1.1, 1.5))  # static / Coulomb force
+    vs = float(np.exp(rng.uniform(np.log(1e-5), np.log(1e-4))))
+    presliding = float(rng.uniform(0.3e-6, 1e-6))  # F_c / sigma0, m
+
+    def make(s):
+        fc = s
+        sigma0 = fc / presliding
+
+        def ode(d, v, z):  # describing function at the Coulomb level
+            return sigma0 * z, v - sigma0 * abs(v) * z / fc
+
+        kd = _describing_hysteresis(ode, FRF_AMPLITUDE)
+        return Spec(loop=LoopEffects(hyst=3, h_k=sigma0, h_a=fc, h_b=ratio * fc,
+                                     fric_vs=vs),
+                    flex_dyn=lambda f: np.full(np.shape(f), kd),
+                    truth={"coulomb_force": fc, "static_force": ratio * fc,
+                           "stribeck_velocity": vs, "bristle_stiffness": sigma0},
+                    comparable={"level": fc})
+
+    return Effect("lugre-friction", "catalogue", ("friction",), make, 5e-3,
+                  ("fe", "frf", "map", "cut"), form="lugre")
+
+
+def integer_converters(rng, ctx) -> Effect:
+    """Integer (truncating) converters and a soft dead zone ``u - b tanh(u / b)``
+    (the catalogue fits rounding steps as additive noise and a hard dead band)."""
+    form = str(rng.choice(["dac", "adc", "dead-zone"]))
+
+    def make(s):
+        if form == "dac":
+            return Spec(loop=LoopEffects(dac_q=s, conv_trunc=True),
+                        truth={"dac_lsb_v": s}, comparable={"dac_step": s})
+        if form == "adc":
+            return Spec(loop=LoopEffects(adc_q=s, conv_trunc=True),
+                        truth={"adc_lsb_m": s}, comparable={"adc_step": s})
+        return Spec(loop=LoopEffects(dac_dead=s), truth={"soft_dead_zone_v": s},
+                    comparable={"dead_band": s})
+
+    s0 = {"dac": 1e-3, "adc": 3e-9, "dead-zone": 1e-3}[form]
+    return Effect("integer-converters", "catalogue", ("converter-quantisation",),
+                  make, s0, ("fe", "map"), needs_noise=form != "dead-zone",
+                  form=form)
+
+
+def mains_pickup(rng, ctx) -> Effect:
+    """Mains harmonics in the logged following error with a drifting phase (the
+    catalogue fits fixed-phase sinusoids per record)."""
+    mains = float(rng.choice([50.0, 60.0]))
+    orders = sorted(rng.choice([1, 3, 5, 7, 9], size=int(rng.integers(1, 4)),
+                               replace=False).tolist())
+    drift = float(rng.uniform(0.05, 0.3))  # Hz, slow wander of the mains frequency
+    dev = float(rng.uniform(0.005, 0.02))  # Hz, its excursion
+
+    def make(s):
+        lines = tuple((mains * h, s / h, h * dev / drift, drift) for h in orders)
+        return Spec(pickup=lines, truth={"mains_hz": mains, "orders": orders,
+                                         "amplitude": s},
+                    comparable={"amplitude": s})
+
+    return Effect("mains-pickup", "catalogue", ("sensor-pickup-lines",), make,
+                  1e-10, ("fe",), form=f"{mains:g} Hz")
+
+
 # ------------------------------------------------------------------ nulls
 def null_nominal(rng, ctx) -> Effect:
     """No effect, the machine file's noise in its documented band."""
@@ -566,6 +662,10 @@ CATALOGUE_LIKE = {
     "spindle-bump": spindle_bump,
     "nose-radius": nose_radius,
     "edge-force": edge_force,
+    "dahl-hysteresis": dahl_hysteresis,
+    "lugre-friction": lugre_friction,
+    "integer-converters": integer_converters,
+    "mains-pickup": mains_pickup,
 }
 OUT_OF_CATALOGUE = {
     "flexure-hysteresis": hysteresis,
