@@ -13,11 +13,13 @@ forms: a mode as a real mass on a spring at the tool holder, a true transport de
 of the held DAC output, waviness as sines, drift with another time law, a
 Lorentzian force-constant profile, a sinh-stiffening flexure, a soft-knee current
 limit, a capacitive-gap sensor law, a von Mises spindle bump, an edge (ploughing)
-force beside the chip-area force. Out-of-catalogue effects: Bouc-Wen or Dahl
-flexure hysteresis, Coulomb friction, DAC or ADC quantisation, a pickup line in
-the logged following error only, tool wear (nose radius growing with cutting
-length), asynchronous spindle axial error. Nulls: nominal noise, base vibration
-continuing below fs / 4096, noise PSDs off by a factor 1.5-2.
+force beside the chip-area force; for the loop effects Bouc-Wen (beta != gamma)
+or Dahl hysteresis, LuGre friction, rounding or truncating converters and a soft
+dead zone, pickup lines in the logged following error only (one line, or mains
+harmonics with a drifting phase). Out-of-catalogue effects: tool wear (nose
+radius growing with cutting length), asynchronous spindle axial error. Nulls:
+nominal noise, base vibration continuing below fs / 4096, noise PSDs off by a
+factor 1.5-2.
 """
 
 from __future__ import annotations
@@ -397,20 +399,22 @@ def edge_force(rng, ctx) -> Effect:
 
 # ------------------------------------------------------------------ out of catalogue
 def hysteresis(rng, ctx) -> Effect:
-    """Flexure hysteresis with memory: Bouc-Wen or Dahl."""
+    """Flexure hysteresis with memory: Bouc-Wen with an asymmetric loop shape
+    (beta != gamma; the catalogue fits beta = gamma) or Dahl."""
     form = str(rng.choice(["bouc-wen", "dahl"]))
     zy = float(rng.uniform(1e-6, 5e-6))
+    shape = float(rng.uniform(0.2, 0.8))  # beta / (beta + gamma)
     k2 = ctx.mach.k[1]
 
     def make(s):
         if form == "bouc-wen":
-            hk, ha = s * k2, 0.5 / zy
+            hk, ha, hb = s * k2, shape / zy, (1 - shape) / zy
 
             def ode(d, v, z):
-                return hk * z, v - ha * abs(v) * z - ha * v * abs(z)
+                return hk * z, v - ha * abs(v) * z - hb * v * abs(z)
 
-            eff = LoopEffects(hyst=1, h_k=hk, h_a=ha, h_b=ha)
-            truth = {"stiffness": hk, "yield_displacement": zy}
+            eff = LoopEffects(hyst=1, h_k=hk, h_a=ha, h_b=hb)
+            truth = {"stiffness": hk, "yield_displacement": zy, "beta_share": shape}
         else:
             fc = s * k2 * zy
             sigma = fc / zy
@@ -423,34 +427,10 @@ def hysteresis(rng, ctx) -> Effect:
             truth = {"stiffness": sigma, "saturation_force": fc}
         kd = _describing_hysteresis(ode, FRF_AMPLITUDE)
         return Spec(loop=eff, flex_dyn=lambda f: np.full(np.shape(f), kd),
-                    truth=truth)
+                    truth=truth, comparable={"stiffness": eff.h_k})
 
-    return Effect("flexure-hysteresis", "out-of-catalogue", (), make, 0.01,
-                  ("fe", "frf", "map", "cut"), form=form)
-
-
-def coulomb_friction(rng, ctx) -> Effect:
-    """Coulomb friction (smoothed sign) on the flexure velocity."""
-    vs = float(np.exp(rng.uniform(np.log(2e-6), np.log(2e-5))))
-
-    def make(s):
-        fc = s
-
-        def fdyn(f):
-            f = np.atleast_1d(np.asarray(f, dtype=float))
-            th = np.linspace(0, 2 * math.pi, 512, endpoint=False)
-            out = np.zeros(f.size, dtype=complex)
-            for i, fi in enumerate(f):
-                w = 2 * math.pi * fi
-                F = fc * np.tanh(w * FRF_AMPLITUDE * np.cos(th) / vs)
-                out[i] = 1j * 2 * np.mean(F * np.cos(th)) / FRF_AMPLITUDE
-            return out
-
-        return Spec(loop=LoopEffects(fric_fc=fc, fric_vs=vs), flex_dyn=fdyn,
-                    truth={"friction_force": fc, "velocity_scale": vs})
-
-    return Effect("coulomb-friction", "out-of-catalogue", (), make, 1e-3,
-                  ("fe", "frf", "map", "cut"))
+    return Effect("flexure-hysteresis", "catalogue", ("flexure-hysteresis",), make,
+                  0.01, ("fe", "frf", "map", "cut"), form=form)
 
 
 def quantisation(rng, ctx) -> Effect:
@@ -459,12 +439,14 @@ def quantisation(rng, ctx) -> Effect:
 
     def make(s):
         if form == "dac":
-            return Spec(loop=LoopEffects(dac_q=s), truth={"dac_lsb_v": s})
-        return Spec(loop=LoopEffects(adc_q=s), truth={"adc_lsb_m": s})
+            return Spec(loop=LoopEffects(dac_q=s), truth={"dac_lsb_v": s},
+                        comparable={"dac_step": s})
+        return Spec(loop=LoopEffects(adc_q=s), truth={"adc_lsb_m": s},
+                    comparable={"adc_step": s})
 
     s0 = 3e-4 if form == "dac" else 1e-9
-    return Effect("quantisation", "out-of-catalogue", (), make, s0, ("fe", "map"),
-                  needs_noise=True, form=form)
+    return Effect("quantisation", "catalogue", ("converter-quantisation",), make, s0,
+                  ("fe", "map"), needs_noise=True, form=form)
 
 
 def pickup_line(rng, ctx) -> Effect:
@@ -477,7 +459,8 @@ def pickup_line(rng, ctx) -> Effect:
     def make(s):
         return Spec(pickup=((f, s),), truth={"frequency": f, "amplitude": s})
 
-    return Effect("sensor-pickup", "out-of-catalogue", (), make, 1e-10, ("fe",))
+    return Effect("sensor-pickup", "catalogue", ("sensor-pickup-lines",), make,
+                  1e-10, ("fe",))
 
 
 def tool_wear(rng, ctx) -> Effect:
@@ -666,12 +649,11 @@ CATALOGUE_LIKE = {
     "lugre-friction": lugre_friction,
     "integer-converters": integer_converters,
     "mains-pickup": mains_pickup,
-}
-OUT_OF_CATALOGUE = {
     "flexure-hysteresis": hysteresis,
-    "coulomb-friction": coulomb_friction,
     "quantisation": quantisation,
     "sensor-pickup": pickup_line,
+}
+OUT_OF_CATALOGUE = {
     "tool-wear": tool_wear,
     "async-spindle": async_spindle,
 }

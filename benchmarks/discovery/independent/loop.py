@@ -446,7 +446,8 @@ def simulate(
     if dtot < 0:
         raise ValueError(f"total loop delay must be >= 0 samples, got {dtot}")
     _sim(p, ctrl_v, 1.0 / mach.fs, dtot, int(nsub), eff.adc_q, eff.dac_q,
-         eff.dac_dead, bool(eff.conv_trunc), mach.sens, r, arr(sensor_noise), arr(current_noise), arr(base), arr(zoff),
+         eff.dac_dead, bool(eff.conv_trunc), mach.sens, r, arr(sensor_noise),
+         arr(current_noise), arr(base), arr(zoff),
          np.ascontiguousarray(ln[:, 0]), np.ascontiguousarray(ln[:, 1]),
          np.ascontiguousarray(ln[:, 2]), float(t0), out)
     return {
