@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,10 +15,14 @@ NAME = "friction"
 
 #: Largest friction force, as a share of the actuator's rated force Kf0 I_max.
 MAX_SHARE = 0.05
-#: Smoothing velocities searched, m/s.
-VELOCITIES = (1e-6, 1e-5, 1e-4)
-#: Smallest and largest smoothing velocity, m/s.
-VELOCITY_RANGE = (1e-7, 1e-3)
+#: Smoothing velocities searched, as shares of the largest (see _max_velocity).
+VELOCITY_SHARES = (1e-4, 1e-3, 1e-2, 0.1, 0.3)
+#: Smallest smoothing velocity, m/s.
+MIN_VELOCITY = 1e-7
+#: Largest smoothing velocity, as a share of the command's peak velocity.
+MAX_VELOCITY_SHARE = 3.0
+#: Peak velocity assumed without an FTS frequency (a facing cut), m/s.
+SLOW_VELOCITY = 3e-3
 #: Probe of the friction level, as a share of the largest level.
 PROBE = 1e-3
 
@@ -30,9 +35,11 @@ _LEVEL_SOURCE = (
     "would stall the tool at each reversal of a lenslet stroke")
 _VELOCITY_SOURCE = (
     "the velocity over which friction changes sign: pre-sliding displacements "
-    "of 0.1-10 um over reversal times of 10 us to 1 ms give 1e-7 to 1e-3 m/s "
-    "(Armstrong-Helouvry et al. 1994; Canudas de Wit et al., IEEE TAC 40 (1995) "
-    "419, LuGre bristle stiffness)")
+    "of 0.1-10 um (Armstrong-Helouvry et al. 1994; Canudas de Wit et al., IEEE "
+    "TAC 40 (1995) 419, LuGre bristle stiffness) traversed at the stroke's "
+    "reversal give 1e-7 m/s and up; above 3 times the command's peak velocity "
+    "2 pi f_FTS s the law is linear to 4 % over the stroke (tanh(1/3) = 0.32): "
+    "viscous damping (a recalibration), not friction")
 
 
 @dataclass(frozen=True)
@@ -47,11 +54,20 @@ class FrictionParams(EffectParams):
         source=_LEVEL_SOURCE)
     velocity: float = quantity(
         1e-5, unit="m/s", doc="smoothing velocity v_s of the sign",
-        low=VELOCITY_RANGE[0], high=VELOCITY_RANGE[1], source=_VELOCITY_SOURCE)
+        low=MIN_VELOCITY,
+        high=Bound("3 (2 pi f_FTS s)", lambda ev, p: _max_velocity(ev)),
+        source=_VELOCITY_SOURCE)
 
     def nonlinearity(self):
         """The loop's friction fields."""
         return {"friction": self.level, "friction_velocity": self.velocity}
+
+
+def _max_velocity(ev) -> float:
+    """Largest smoothing velocity in m/s: 3 times the command's peak velocity."""
+    if ev.fts > 0:
+        return MAX_VELOCITY_SHARE * 2 * math.pi * ev.fts * ev.stroke
+    return MAX_VELOCITY_SHARE * SLOW_VELOCITY
 
 
 def _rated(ev) -> float:
@@ -84,7 +100,9 @@ class FrictionEffect(Effect):
         return PROBE * MAX_SHARE * _rated(ev)
 
     def configs(self, ev, model):
-        return [Config(f"v_s {v:g} m/s", {"vs": v}) for v in VELOCITIES]
+        vmax = _max_velocity(ev)
+        return [Config(f"v_s {c * vmax:.3g} m/s", {"vs": c * vmax})
+                for c in VELOCITY_SHARES]
 
     def columns(self, model, cfg, ev):
         pr = self._probe(ev)
@@ -100,5 +118,6 @@ class FrictionEffect(Effect):
         hi = MAX_SHARE * _rated(ev)
         return [
             Free("level", NAME, slot, "level", 1e-2 * PROBE * hi, hi, True),
-            Free("velocity", NAME, slot, "velocity", *VELOCITY_RANGE, True),
+            Free("velocity", NAME, slot, "velocity", MIN_VELOCITY, _max_velocity(ev),
+                 True),
         ]
