@@ -5,8 +5,9 @@ independent``: its own loop, noise and effect forms, none of them the catalogue'
 fitting form): LuGre friction with a Stribeck peak, Dahl hysteresis, a soft dead
 zone ahead of a truncating DAC, mains pickup harmonics with a drifting phase. The
 campaign is small (idle records and one air cut, following error only) so that a
-diagnosis takes seconds; the diagnosis must name the effect first, or at least
-not call the case consistent. Seeds are fixed; the strengths put each effect a
+diagnosis takes about a minute; the diagnosis must name the effect first (the
+pickup lines: or a base line, which only a map would refuse), never call the case
+consistent. Seeds are fixed; the strengths put each effect a
 few noise levels above the records' noise.
 """
 
@@ -57,9 +58,13 @@ CASES = {
         hyst=2, h_k=400.0, h_a=400.0 * 1.5e-6)), "flexure-hysteresis"),
     "soft-dead-zone": (lambda E: E.Spec(loop=E.LoopEffects(
         dac_dead=2e-3, dac_q=3e-5, conv_trunc=True)), "converter-quantisation"),
+    # without a map a line in the following error has two explanations of equal
+    # likelihood (a base line's amplitude through the loop is free too): only
+    # the maps tell a sensor line from a base line (issue 19, item 4), so here
+    # either name counts and the case must not be called consistent
     "mains-pickup": (lambda E: E.Spec(pickup=((150.0, 4e-9, 0.2, 0.1),
                                               (450.0, 1.5e-9, 0.6, 0.1))),
-                     "sensor-pickup-lines"),
+                     ("sensor-pickup-lines", "base-vibration-lines")),
 }
 
 
@@ -70,5 +75,6 @@ def test_loop_effect_is_not_called_consistent(gen, tmp_path, name):
     d = _case(gen, tmp_path, make(gen.effects), seed=17)
     names = _named(d)
     assert d.verdict != "consistent", (name, d.verdict)
-    assert names and names[0] == expected, (name, d.verdict, names)
+    allowed = expected if isinstance(expected, tuple) else (expected,)
+    assert names and names[0] in allowed, (name, d.verdict, names)
     assert np.isfinite(d.fit_after_percent)
