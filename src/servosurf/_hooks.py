@@ -9,6 +9,9 @@ A *hook* is any object with any of these optional methods (SI units throughout):
   (saturation, ``Kf(x)``, flexure stiffness, ...) the loop runs with;
 * ``base_lines() -> tuple of (frequency, amplitude)``: deterministic sinusoids of
   the base displacement (Hz, m zero-to-peak), through the closed loop;
+* ``sensor_lines() -> tuple of (frequency, amplitude)``: deterministic sinusoids
+  in the logged measured position only (Hz, m zero-to-peak): electrical pickup
+  outside the loop, in the following-error records but not on the cut surface;
 * ``machine(machine) -> Machine``: a changed machine file (the diagnosis reads its
   disturbance PSDs from it);
 * ``workpiece(workpiece) -> Workpiece``: a changed work material (cutting force);
@@ -40,6 +43,7 @@ __all__ = [
     "compose_perturbation",
     "compose_nonlinearity",
     "compose_base_lines",
+    "compose_sensor_lines",
     "apply_hooks",
     "compose_path_z",
 ]
@@ -49,6 +53,7 @@ HOOKS = (
     "perturbation",
     "nonlinearity",
     "base_lines",
+    "sensor_lines",
     "machine",
     "workpiece",
     "tool",
@@ -120,6 +125,16 @@ def compose_base_lines(hooks: Sequence[Any]) -> tuple[tuple[float, float], ...]:
     for h in hooks:
         if hasattr(h, "base_lines"):
             out += [(float(f), float(a)) for f, a in h.base_lines()]
+    return tuple(out)
+
+
+def compose_sensor_lines(hooks: Sequence[Any]) -> tuple[tuple[float, float], ...]:
+    """Every sensor pickup line ``(frequency in Hz, amplitude in m)`` of ``hooks``
+    (in the logged following error only, outside the loop)."""
+    out: list[tuple[float, float]] = []
+    for h in hooks:
+        if hasattr(h, "sensor_lines"):
+            out += [(float(f), float(a)) for f, a in h.sensor_lines()]
     return tuple(out)
 
 

@@ -92,6 +92,16 @@ def _term(name: str, case, ev):
         # 2 um of radius growth over the toolpath (the third ring cuts 3 s in)
         v = cutting_speed(case.toolpath)
         return (E.ToolWearParams(2e-6 / (v * case.toolpath.path.duration), v),)
+    if name == "flexure-hysteresis":
+        return (E.FlexureHysteresisParams(0.05 * ev.nominal.flexure_stiffness,
+                                          0.2 * ev.stroke),)
+    if name == "friction":
+        return (E.FrictionParams(0.02, 1e-5),)
+    if name == "converter-quantisation":
+        return (E.ConverterQuantisationParams(dac_step=3e-4, adc_step=2e-9,
+                                              dead_band=2e-4),)
+    if name == "sensor-pickup-lines":
+        return (E.SensorPickupParams(150.0, 2e-9), E.SensorPickupParams(2330.0, 1e-9))
     raise KeyError(name)
 
 
@@ -230,7 +240,7 @@ def test_report_keys_are_the_fields_with_units(name, small):
               "rad": "rad", "m/s": "m_per_s", "m/N": "m_per_n", "N/m": "n_per_m",
               "N/m^2": "n_per_m2", "N/m^3": "n_per_m3", "N s/m": "n_s_per_m",
               "N/A": "n_per_a", "1/m": "per_m", "1/m^2": "per_m2",
-              "m/sqrt(Hz)": "m_per_sqrt_hz"}
+              "m/sqrt(Hz)": "m_per_sqrt_hz", "N": "n", "V": "v"}
     for slot in range(eff.slots(m)):
         q = eff.term(m, slot)
         rep = eff.report(m, slot)

@@ -281,9 +281,16 @@ def _run(ctx, spec: Spec, command: np.ndarray, rng, *, clean: bool, low_freq: bo
 
 
 def _pickup(spec: Spec, t: np.ndarray) -> np.ndarray:
+    """Pickup lines ``(f, a)`` or, with a drifting phase, ``(f, a, beta, f_d)``:
+    ``a cos(2 pi f t + beta sin(2 pi f_d t))`` (a mains frequency wandering slowly
+    about its nominal value, beta in rad, f_d in Hz)."""
     out = np.zeros(t.size)
-    for f, a in spec.pickup:
-        out += a * np.cos(2 * math.pi * f * t)
+    for line in spec.pickup:
+        f, a = line[0], line[1]
+        ph = 0.0
+        if len(line) == 4:
+            ph = line[2] * np.sin(2 * math.pi * line[3] * t)
+        out += a * np.cos(2 * math.pi * f * t + ph)
     return out
 
 

@@ -15,11 +15,12 @@ Lorentzian force-constant profile, a sinh-stiffening flexure, a soft-knee curren
 limit, a capacitive-gap sensor law, a von Mises spindle bump, an edge (ploughing)
 force beside the chip-area force, tool wear (nose radius growing with cutting
 length, catalogue's tool-wear), asynchronous spindle axial error (non-integer
-orders plus a narrow band, catalogue's spindle-async-error). Out-of-catalogue
-effects: Bouc-Wen or Dahl flexure hysteresis, Coulomb friction, DAC or ADC
-quantisation, a pickup line in the logged following error only. Nulls: nominal
-noise, base vibration continuing below fs / 4096, noise PSDs off by a factor
-1.5-2.
+orders plus a narrow band, catalogue's spindle-async-error) the chip-area force; for the loop effects Bouc-Wen (beta != gamma)
+or Dahl hysteresis, LuGre friction, rounding or truncating converters and a soft
+dead zone, pickup lines in the logged following error only (one line, or mains
+harmonics with a drifting phase). Nulls:
+nominal noise, base vibration continuing below fs / 4096, noise PSDs off by a
+factor 1.5-2.
 """
 
 from __future__ import annotations
@@ -44,8 +45,9 @@ class Spec:
         Effects inside the loop.
     lines : tuple of (f Hz, amplitude m)
         Base-vibration lines (phase random per record).
-    pickup : tuple of (f Hz, amplitude m)
-        Lines added to the logged following error only.
+    pickup : tuple of (f Hz, amplitude m) or (f, amplitude, beta rad, f_d Hz)
+        Lines added to the logged following error only (with a phase drifting
+        as ``beta sin(2 pi f_d t)``).
     offset : callable or None
         ``offset(t, theta)``: tool-to-work height outside the loop, m.
     radius : callable or None
@@ -398,20 +400,22 @@ def edge_force(rng, ctx) -> Effect:
 
 # ------------------------------------------------------------------ out of catalogue
 def hysteresis(rng, ctx) -> Effect:
-    """Flexure hysteresis with memory: Bouc-Wen or Dahl."""
+    """Flexure hysteresis with memory: Bouc-Wen with an asymmetric loop shape
+    (beta != gamma; the catalogue fits beta = gamma) or Dahl."""
     form = str(rng.choice(["bouc-wen", "dahl"]))
     zy = float(rng.uniform(1e-6, 5e-6))
+    shape = float(rng.uniform(0.2, 0.8))  # beta / (beta + gamma)
     k2 = ctx.mach.k[1]
 
     def make(s):
         if form == "bouc-wen":
-            hk, ha = s * k2, 0.5 / zy
+            hk, ha, hb = s * k2, shape / zy, (1 - shape) / zy
 
             def ode(d, v, z):
-                return hk * z, v - ha * abs(v) * z - ha * v * abs(z)
+                return hk * z, v - ha * abs(v) * z - hb * v * abs(z)
 
-            eff = LoopEffects(hyst=1, h_k=hk, h_a=ha, h_b=ha)
-            truth = {"stiffness": hk, "yield_displacement": zy}
+            eff = LoopEffects(hyst=1, h_k=hk, h_a=ha, h_b=hb)
+            truth = {"stiffness": hk, "yield_displacement": zy, "beta_share": shape}
         else:
             fc = s * k2 * zy
             sigma = fc / zy
@@ -424,34 +428,10 @@ def hysteresis(rng, ctx) -> Effect:
             truth = {"stiffness": sigma, "saturation_force": fc}
         kd = _describing_hysteresis(ode, FRF_AMPLITUDE)
         return Spec(loop=eff, flex_dyn=lambda f: np.full(np.shape(f), kd),
-                    truth=truth)
+                    truth=truth, comparable={"stiffness": eff.h_k})
 
-    return Effect("flexure-hysteresis", "out-of-catalogue", (), make, 0.01,
-                  ("fe", "frf", "map", "cut"), form=form)
-
-
-def coulomb_friction(rng, ctx) -> Effect:
-    """Coulomb friction (smoothed sign) on the flexure velocity."""
-    vs = float(np.exp(rng.uniform(np.log(2e-6), np.log(2e-5))))
-
-    def make(s):
-        fc = s
-
-        def fdyn(f):
-            f = np.atleast_1d(np.asarray(f, dtype=float))
-            th = np.linspace(0, 2 * math.pi, 512, endpoint=False)
-            out = np.zeros(f.size, dtype=complex)
-            for i, fi in enumerate(f):
-                w = 2 * math.pi * fi
-                F = fc * np.tanh(w * FRF_AMPLITUDE * np.cos(th) / vs)
-                out[i] = 1j * 2 * np.mean(F * np.cos(th)) / FRF_AMPLITUDE
-            return out
-
-        return Spec(loop=LoopEffects(fric_fc=fc, fric_vs=vs), flex_dyn=fdyn,
-                    truth={"friction_force": fc, "velocity_scale": vs})
-
-    return Effect("coulomb-friction", "out-of-catalogue", (), make, 1e-3,
-                  ("fe", "frf", "map", "cut"))
+    return Effect("flexure-hysteresis", "catalogue", ("flexure-hysteresis",), make,
+                  0.01, ("fe", "frf", "map", "cut"), form=form)
 
 
 def quantisation(rng, ctx) -> Effect:
@@ -460,12 +440,14 @@ def quantisation(rng, ctx) -> Effect:
 
     def make(s):
         if form == "dac":
-            return Spec(loop=LoopEffects(dac_q=s), truth={"dac_lsb_v": s})
-        return Spec(loop=LoopEffects(adc_q=s), truth={"adc_lsb_m": s})
+            return Spec(loop=LoopEffects(dac_q=s), truth={"dac_lsb_v": s},
+                        comparable={"dac_step": s})
+        return Spec(loop=LoopEffects(adc_q=s), truth={"adc_lsb_m": s},
+                    comparable={"adc_step": s})
 
     s0 = 3e-4 if form == "dac" else 1e-9
-    return Effect("quantisation", "out-of-catalogue", (), make, s0, ("fe", "map"),
-                  needs_noise=True, form=form)
+    return Effect("quantisation", "catalogue", ("converter-quantisation",), make, s0,
+                  ("fe", "map"), needs_noise=True, form=form)
 
 
 def pickup_line(rng, ctx) -> Effect:
@@ -478,7 +460,8 @@ def pickup_line(rng, ctx) -> Effect:
     def make(s):
         return Spec(pickup=((f, s),), truth={"frequency": f, "amplitude": s})
 
-    return Effect("sensor-pickup", "out-of-catalogue", (), make, 1e-10, ("fe",))
+    return Effect("sensor-pickup", "catalogue", ("sensor-pickup-lines",), make,
+                  1e-10, ("fe",))
 
 
 def tool_wear(rng, ctx) -> Effect:
@@ -540,6 +523,101 @@ def async_spindle(rng, ctx) -> Effect:
                   ("map",))
 
 
+# ------------------------------------------------------------------ loop effects
+# forms unlike the catalogue's loop modules (flexure-hysteresis: Bouc-Wen;
+# friction: tanh Coulomb; converter-quantisation: rounding steps as additive
+# noise, a hard dead band; sensor-pickup-lines: fixed-phase sinusoids)
+def dahl_hysteresis(rng, ctx) -> Effect:
+    """Flexure hysteresis generated with the Dahl model (the catalogue fits
+    Bouc-Wen): ``F' = sigma v (1 - F sgn(v) / F_c)``."""
+    zy = float(rng.uniform(0.5e-6, 3e-6))
+    k2 = ctx.mach.k[1]
+
+    def make(s):
+        fc = s * k2 * zy
+        sigma = fc / zy
+
+        def ode(d, v, z):
+            sg = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
+            return z, sigma * v * (1 - z * sg / fc)
+
+        kd = _describing_hysteresis(ode, FRF_AMPLITUDE)
+        return Spec(loop=LoopEffects(hyst=2, h_k=sigma, h_a=fc),
+                    flex_dyn=lambda f: np.full(np.shape(f), kd),
+                    truth={"stiffness": sigma, "saturation_force": fc},
+                    comparable={"stiffness": sigma, "yield_displacement": zy})
+
+    return Effect("dahl-hysteresis", "catalogue", ("flexure-hysteresis",), make,
+                  0.02, ("fe", "frf", "map", "cut"), form="dahl")
+
+
+def lugre_friction(rng, ctx) -> Effect:
+    """Friction generated with the LuGre bristle model and a Stribeck peak (the
+    catalogue fits a tanh Coulomb law): ``F = sigma0 z``, ``z' = v - sigma0 |v| z /
+    g(v)``, ``g = F_c + (F_s - F_c) exp(-(v / v_s)^2)``."""
+    ratio = float(rng.uniform(1.1, 1.5))  # static / Coulomb force
+    vs = float(np.exp(rng.uniform(np.log(1e-5), np.log(1e-4))))
+    presliding = float(rng.uniform(0.3e-6, 1e-6))  # F_c / sigma0, m
+
+    def make(s):
+        fc = s
+        sigma0 = fc / presliding
+
+        def ode(d, v, z):  # describing function at the Coulomb level
+            return sigma0 * z, v - sigma0 * abs(v) * z / fc
+
+        kd = _describing_hysteresis(ode, FRF_AMPLITUDE)
+        return Spec(loop=LoopEffects(hyst=3, h_k=sigma0, h_a=fc, h_b=ratio * fc,
+                                     fric_vs=vs),
+                    flex_dyn=lambda f: np.full(np.shape(f), kd),
+                    truth={"coulomb_force": fc, "static_force": ratio * fc,
+                           "stribeck_velocity": vs, "bristle_stiffness": sigma0},
+                    comparable={"level": fc})
+
+    return Effect("lugre-friction", "catalogue", ("friction",), make, 5e-3,
+                  ("fe", "frf", "map", "cut"), form="lugre")
+
+
+def integer_converters(rng, ctx) -> Effect:
+    """Integer (truncating) converters and a soft dead zone ``u - b tanh(u / b)``
+    (the catalogue fits rounding steps as additive noise and a hard dead band)."""
+    form = str(rng.choice(["dac", "adc", "dead-zone"]))
+
+    def make(s):
+        if form == "dac":
+            return Spec(loop=LoopEffects(dac_q=s, conv_trunc=True),
+                        truth={"dac_lsb_v": s}, comparable={"dac_step": s})
+        if form == "adc":
+            return Spec(loop=LoopEffects(adc_q=s, conv_trunc=True),
+                        truth={"adc_lsb_m": s}, comparable={"adc_step": s})
+        return Spec(loop=LoopEffects(dac_dead=s), truth={"soft_dead_zone_v": s},
+                    comparable={"dead_band": s})
+
+    s0 = {"dac": 1e-3, "adc": 3e-9, "dead-zone": 1e-3}[form]
+    return Effect("integer-converters", "catalogue", ("converter-quantisation",),
+                  make, s0, ("fe", "map"), needs_noise=form != "dead-zone",
+                  form=form)
+
+
+def mains_pickup(rng, ctx) -> Effect:
+    """Mains harmonics in the logged following error with a drifting phase (the
+    catalogue fits fixed-phase sinusoids per record)."""
+    mains = float(rng.choice([50.0, 60.0]))
+    orders = sorted(rng.choice([1, 3, 5, 7, 9], size=int(rng.integers(1, 4)),
+                               replace=False).tolist())
+    drift = float(rng.uniform(0.05, 0.3))  # Hz, slow wander of the mains frequency
+    dev = float(rng.uniform(0.005, 0.02))  # Hz, its excursion
+
+    def make(s):
+        lines = tuple((mains * h, s / h, h * dev / drift, drift) for h in orders)
+        return Spec(pickup=lines, truth={"mains_hz": mains, "orders": orders,
+                                         "amplitude": s},
+                    comparable={"amplitude": s})
+
+    return Effect("mains-pickup", "catalogue", ("sensor-pickup-lines",), make,
+                  1e-10, ("fe",), form=f"{mains:g} Hz")
+
+
 # ------------------------------------------------------------------ nulls
 def null_nominal(rng, ctx) -> Effect:
     """No effect, the machine file's noise in its documented band."""
@@ -576,13 +654,17 @@ CATALOGUE_LIKE = {
     "edge-force": edge_force,
     "tool-wear": tool_wear,
     "async-spindle": async_spindle,
-}
-OUT_OF_CATALOGUE = {
+    "dahl-hysteresis": dahl_hysteresis,
+    "lugre-friction": lugre_friction,
+    "integer-converters": integer_converters,
+    "mains-pickup": mains_pickup,
     "flexure-hysteresis": hysteresis,
-    "coulomb-friction": coulomb_friction,
     "quantisation": quantisation,
     "sensor-pickup": pickup_line,
 }
+#: Every form the catalogue lacks has been given a catalogue module (loop- and
+#: path-side effects); new out-of-catalogue forms go here.
+OUT_OF_CATALOGUE: dict = {}
 NULLS = {
     "null-nominal": null_nominal,
     "null-lowfreq": null_lowfreq,

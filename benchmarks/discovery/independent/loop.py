@@ -53,9 +53,13 @@ class LoopEffects:
         cosh(d0/w) d / w]`` on ``d = x2 - x3`` (N, m, m).
     hyst : int
         0 none, 1 Bouc-Wen ``F = h_k z``, ``z' = v - h_a |v| z - h_b v |z|``;
-        2 Dahl ``F' = h_k v (1 - F sgn(v) / h_a)``.
+        2 Dahl ``F' = h_k v (1 - F sgn(v) / h_a)``; 3 LuGre friction (Canudas de
+        Wit et al. 1995) ``F = h_k z``, ``z' = v - h_k |v| z / g(v)``, ``g(v) =
+        h_a + (h_b - h_a) exp(-(v / fric_vs)^2)`` (bristle damping and viscous
+        term zero).
     h_k, h_a, h_b : float
-        Hysteresis parameters (N/m, 1/m, 1/m for Bouc-Wen; N/m, N for Dahl).
+        Hysteresis parameters (N/m, 1/m, 1/m for Bouc-Wen; N/m, N for Dahl;
+        bristle stiffness N/m, Coulomb and static force N for LuGre).
     fric_fc, fric_vs : float
         Coulomb friction ``F = fc tanh(v / vs)`` on the flexure velocity (N, m/s).
     sn_eps, sn_g0 : float
@@ -65,6 +69,12 @@ class LoopEffects:
         ADC LSB as sensed position, m (0 = none).
     dac_q : float
         DAC LSB, V (0 = none).
+    dac_dead : float
+        Soft dead zone of the command ``u - b tanh(u / b)`` ahead of the DAC, V
+        (0 = none).
+    conv_trunc : bool
+        Integer converters: the DAC code truncates toward zero and the ADC code
+        floors (two's complement), instead of rounding to the nearest level.
     """
 
     linear: LinearExtras = field(default_factory=LinearExtras)
@@ -86,6 +96,8 @@ class LoopEffects:
     sn_g0: float = 1.0
     adc_q: float = 0.0
     dac_q: float = 0.0
+    dac_dead: float = 0.0
+    conv_trunc: bool = False
 
 
 @dataclass(frozen=True)
@@ -158,6 +170,10 @@ def _rhs(X, cur, xg, vg, zoff, p, dX):
         fflex += zh
         sg = 1.0 if v23 > 0.0 else (-1.0 if v23 < 0.0 else 0.0)
         dz = p[31] * v23 * (1.0 - zh * sg / p[32])
+    elif hk == 3:
+        fflex += p[31] * zh
+        g = p[32] + (p[33] - p[32]) * math.exp(-((v23 / p[35]) ** 2))
+        dz = v23 - p[31] * abs(v23) * zh / g
     if p[34] != 0.0:
         fflex += p[34] * math.tanh(v23 / p[35])
     f1 = fchip + p[5] * (x2 - x1) + p[10] * (v2 - v1)
@@ -230,8 +246,8 @@ def _base(t, lf, la, lp):
 
 
 @njit(cache=True)
-def _sim(p, ctrl, T, dtot, nsub, adc_q, dac_q, sens, r, nsen, icur, xgn, zoff,
-         lf, la, lp, t0, out):
+def _sim(p, ctrl, T, dtot, nsub, adc_q, dac_q, dac_dead, trunc, sens, r, nsen,
+         icur, xgn, zoff, lf, la, lp, t0, out):
     n = r.size
     X = np.zeros(13)
     Xs = np.zeros(13)
@@ -260,14 +276,22 @@ def _sim(p, ctrl, T, dtot, nsub, adc_q, dac_q, sens, r, nsen, icur, xgn, zoff,
         # ---- sample and control
         y_meas = X[10] + nsen[k]
         if adc_q > 0.0:
-            y_meas = adc_q * math.floor(y_meas / adc_q + 0.5)
+            if trunc:
+                y_meas = adc_q * math.floor(y_meas / adc_q)
+            else:
+                y_meas = adc_q * math.floor(y_meas / adc_q + 0.5)
         e = sens * (r[k] - y_meas)
         integ += 0.5 * T * ki * (e + e_prev)
         deriv = ad * deriv + bd * (e - e_prev)
         e_prev = e
         u = kp * e + integ + deriv
+        if dac_dead > 0.0:
+            u = u - dac_dead * math.tanh(u / dac_dead)
         if dac_q > 0.0:
-            u = dac_q * math.floor(u / dac_q + 0.5)
+            if trunc:
+                u = dac_q * math.trunc(u / dac_q)
+            else:
+                u = dac_q * math.floor(u / dac_q + 0.5)
         for j in range(nd + 1, 0, -1):
             buf[j] = buf[j - 1]
         buf[0] = u
@@ -421,8 +445,9 @@ def simulate(
     dtot = mach.delay + eff.linear.extra_delay * mach.fs
     if dtot < 0:
         raise ValueError(f"total loop delay must be >= 0 samples, got {dtot}")
-    _sim(p, ctrl_v, 1.0 / mach.fs, dtot, int(nsub), eff.adc_q, eff.dac_q, mach.sens,
-         r, arr(sensor_noise), arr(current_noise), arr(base), arr(zoff),
+    _sim(p, ctrl_v, 1.0 / mach.fs, dtot, int(nsub), eff.adc_q, eff.dac_q,
+         eff.dac_dead, bool(eff.conv_trunc), mach.sens, r, arr(sensor_noise),
+         arr(current_noise), arr(base), arr(zoff),
          np.ascontiguousarray(ln[:, 0]), np.ascontiguousarray(ln[:, 1]),
          np.ascontiguousarray(ln[:, 2]), float(t0), out)
     return {

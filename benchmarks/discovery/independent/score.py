@@ -201,6 +201,15 @@ def param_error(named: str, comp: dict, est: dict, kt0: float) -> float | None:
     if named == "cutting-force-coefficient":
         return abs(est.get("specific_force", math.nan) - comp["specific_force"]) / abs(
             comp["specific_force"] - kt0)
+    if named == "flexure-hysteresis" and "stiffness" in comp:
+        # small-amplitude slopes of the Dahl and Bouc-Wen elements
+        return _rel(est.get("stiffness", math.nan), comp["stiffness"])
+    if named == "friction" and "level" in comp:
+        return _rel(est.get("level", math.nan), comp["level"])
+    if named == "converter-quantisation":
+        for k in ("dac_step", "adc_step", "dead_band"):
+            if k in comp:
+                return _rel(est.get(k, math.nan), comp[k])
     return None
 
 

@@ -195,12 +195,11 @@ def line_power(
     """
     out = np.zeros(np.shape(freq))
     lines = case.base_lines(p)
-    if not lines:
+    pickup = case.sensor_lines(p) if output == "fe" else ()
+    if not lines and not pickup:
         return out
-    f0 = np.asarray([f for f, _ in lines], dtype=float)
-    a = np.asarray([a for _, a in lines], dtype=float)
-    h = case.paths(p, f0)[("base", output)]
-    amp2 = (a * np.abs(h)) ** 2
+    amp2 = _line_amplitudes(case, p, output) ** 2
+    f0 = np.asarray([f for f, _ in lines + pickup], dtype=float)
     k = np.asarray(freq) * n / fs
     for j in range(f0.size):
         k0 = f0[j] * n / fs
@@ -249,11 +248,17 @@ def expected_periodogram(
 
 
 def _line_amplitudes(case: CaseModel, p: Model, output: str) -> np.ndarray:
-    """Amplitudes (m) of ``p``'s base lines in ``output`` (``fe`` or ``tool``)."""
+    """Amplitudes (m) of ``p``'s base lines in ``output`` (``fe`` or ``tool``),
+    then (``fe`` only) of its sensor pickup lines, which the loop does not see."""
     lines = case.base_lines(p)
     f0 = np.asarray([f for f, _ in lines], dtype=float)
-    h = case.paths(p, f0)[("base", output)]
-    return np.asarray([a for _, a in lines], dtype=float) * np.abs(h)
+    amps = np.asarray([a for _, a in lines], dtype=float)
+    if f0.size:
+        amps = amps * np.abs(case.paths(p, f0)[("base", output)])
+    if output == "fe":
+        pickup = case.sensor_lines(p)
+        amps = np.concatenate([amps, np.asarray([a for _, a in pickup], float)])
+    return amps
 
 
 class Context:
@@ -406,7 +411,7 @@ class SpectralBlock(Block):
             n=int(self.freq.size),
         )
 
-    groups = ("perturbation", "base_lines", "machine")
+    groups = ("perturbation", "base_lines", "sensor_lines", "machine")
 
     def expected(self, p: Model) -> np.ndarray:
         """Expected periodogram (m^2/Hz) at the block's bins under ``p``."""
@@ -508,7 +513,7 @@ class TimeBlock(Block):
             tot += 2 * int(keep.sum()) - _in_band_dof(q, keep)
         super().__init__(recording=name, kind="following-error", domain="time", n=tot)
 
-    groups = ("perturbation", "nonlinearity", "base_lines")
+    groups = ("perturbation", "nonlinearity", "base_lines", "sensor_lines")
 
     @property
     def time_span(self) -> float:
@@ -552,6 +557,8 @@ class TimeBlock(Block):
         q = self.bases[i]
         x = np.fft.rfft(project_low_band(self.residual_time(p, i), q))[keep] * w
         lines = self.ctx.case.base_lines(p)
+        x = np.fft.rfft(self.residual_time(p, i))[keep] * w
+        lines = self.ctx.case.base_lines(p) + self.ctx.case.sensor_lines(p)
         if lines:
             n = self.records[i]["fe"].size
             t = self.records[i].get("t0", 0.0) + np.arange(n) / self.fs
@@ -592,7 +599,7 @@ class TimeBlock(Block):
 class CutBlock(TimeBlock):
     """A cut: following error (GLS as :class:`TimeBlock`) of the toolpath cut."""
 
-    groups = SIM_GROUPS + ("base_lines",)
+    groups = SIM_GROUPS + ("base_lines", "sensor_lines")
 
     def __init__(
         self, ctx: Context, name: str, data: dict, p_noise: Model

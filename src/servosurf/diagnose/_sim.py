@@ -102,6 +102,11 @@ class CaseModel:
         """Base-vibration lines of ``model``: ``(frequency in Hz, amplitude in m)``."""
         return _hooks.compose_base_lines(model.hooks("base_lines"))
 
+    def sensor_lines(self, model: Model) -> tuple[tuple[float, float], ...]:
+        """Sensor pickup lines of ``model`` (logged following error only):
+        ``(frequency in Hz, amplitude in m)``."""
+        return _hooks.compose_sensor_lines(model.hooks("sensor_lines"))
+
     def hooked_machine(self, model: Model) -> Machine:
         """The installed machine through ``model``'s ``machine`` hooks (the
         diagnosis reads its disturbance PSDs)."""

@@ -38,7 +38,9 @@ changing in time, swept revolution by revolution), ``path_z(t, theta, r, z) -> d
 ``perturbation() -> LoopPerturbation`` (plant change under the installed
 controller), ``nonlinearity() -> dict`` (fields of
 :class:`servosurf.servo.Nonlinearity`) and ``base_lines()`` (deterministic base
-sinusoids ``(frequency, amplitude)``, through the loop from zero phase). The
+sinusoids ``(frequency, amplitude)``, through the loop from zero phase);
+``sensor_lines()`` adds sinusoids to the logged reading only (the following error,
+not the surface). The
 discrepancy catalogue's fitted terms are hooks
 (``simulate(spec, hooks=diagnosis.model.hooks())``).
 """
@@ -301,6 +303,10 @@ def simulate(
                         extra = extra + wave
                     else:
                         fol = fol + wave
+        for f, a in _hooks.compose_sensor_lines(hooks):
+            # pickup in the logged reading only: outside the loop, not on the cut
+            # surface (the following error is reference minus reading)
+            fol = fol - a * np.cos(2 * np.pi * f * t)
         dev["hooks"] = extra
 
     kfield = _kernel_field(spec)

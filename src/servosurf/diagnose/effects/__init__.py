@@ -46,20 +46,27 @@ from ._base import (
     unit_suffix,
 )
 from ._base_lines import BaseLineParams, BaseLinesEffect
+from ._converter_quantisation import (
+    ConverterQuantisationEffect,
+    ConverterQuantisationParams,
+)
 from ._cutting_force_coefficient import (
     CuttingForceCoefficientEffect,
     CuttingForceCoefficientParams,
 )
 from ._elastic_recovery import ElasticRecoveryEffect, ElasticRecoveryParams
+from ._flexure_hysteresis import FlexureHysteresisEffect, FlexureHysteresisParams
 from ._flexure_nonlinearity import FlexureNonlinearityEffect, FlexureNonlinearityParams
 from ._force_constant_position import (
     ForceConstantPositionEffect,
     ForceConstantPositionParams,
 )
+from ._friction import FrictionEffect, FrictionParams
 from ._loop_delay import LoopDelayEffect, LoopDelayParams
 from ._recalibration import RecalibrationEffect, RecalibrationParams
 from ._sensor_noise_shape import SensorNoiseShapeEffect, SensorNoiseShapeParams
 from ._sensor_nonlinearity import SensorNonlinearityEffect, SensorNonlinearityParams
+from ._sensor_pickup_lines import SensorPickupLinesEffect, SensorPickupParams
 from ._spindle_async_error import SpindleAsyncErrorEffect, SpindleAsyncErrorParams
 from ._spindle_axial_error import SpindleAxialErrorEffect, SpindleAxialErrorParams
 from ._structural_mode import StructuralModeEffect, StructuralModeParams
@@ -100,6 +107,10 @@ __all__ = [
     "RecalibrationParams",
     "SpindleAsyncErrorParams",
     "ToolWearParams",
+    "FlexureHysteresisParams",
+    "FrictionParams",
+    "ConverterQuantisationParams",
+    "SensorPickupParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -121,6 +132,10 @@ CATALOGUE: tuple[Effect, ...] = (
     RecalibrationEffect(),
     SpindleAsyncErrorEffect(),
     ToolWearEffect(),
+    FlexureHysteresisEffect(),
+    FrictionEffect(),
+    ConverterQuantisationEffect(),
+    SensorPickupLinesEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])

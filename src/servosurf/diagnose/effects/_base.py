@@ -132,6 +132,8 @@ _SUFFIX = {
     "1/m": "per_m",
     "1/m^2": "per_m2",
     "m/sqrt(Hz)": "m_per_sqrt_hz",
+    "N": "n",
+    "V": "v",
 }
 
 
