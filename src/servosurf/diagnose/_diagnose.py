@@ -156,6 +156,11 @@ def build_case(man: Manifest) -> CaseModel:
     from ..toolpath import load_toolpath
 
     m = load_machine(man.machine)
+    if m.axis.model != "fts":
+        raise ConfigError(
+            f"{man.path}: machine {m.name!r} has a {m.axis.model!r} Z axis; the "
+            "diagnosis models the seed paper's FTS loop (give case.machine an FTS "
+            "machine, e.g. \"seed-prototype\")")
     if man.disturbances:
         m = m.with_disturbances(man.disturbances)
     if man.moving_mass is not None:

@@ -75,9 +75,10 @@ __all__ = [
     "simulation_manifest",
 ]
 
-#: Toolpath kinds whose maps and profiles the diagnosis models (a design surface
-#: and an NC program are simulated, not yet diagnosed).
-DIAGNOSABLE_TOOLPATHS = ("lenslet", "facing")
+#: Toolpath kinds whose maps and profiles the diagnosis models: every kind
+#: ``servosurf simulate`` cuts (design surfaces and NC programs through their
+#: spiral passes, on an FTS machine).
+DIAGNOSABLE_TOOLPATHS = ("lenslet", "facing", "surface", "nc")
 
 #: Recording kinds accepted in a manifest.
 KINDS = (

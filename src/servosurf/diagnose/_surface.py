@@ -32,6 +32,7 @@ from .effects._base import Model
 __all__ = [
     "SPIRAL_KINDS",
     "spiral_pass_times",
+    "feed_per_rev",
     "PointSet",
     "ToolTrajectory",
     "tool_trajectory",
@@ -77,6 +78,23 @@ def _spiral_geometry(spec) -> tuple[np.ndarray, np.ndarray, int]:
     offset = spec.tool.nose_radius * slope / math.sqrt(1.0 + slope * slope)
     k = int(math.ceil((offset + f_max) / max(f_min, 1e-12))) + 1
     return tg, rg, min(max(k, 2), MAX_SIDE_PASSES)
+
+
+def feed_per_rev(spec) -> float:
+    """Radial feed per revolution in m: the path's, or for a spiral path whose feed
+    varies (:data:`SPIRAL_KINDS`) the median over its revolutions."""
+    f = getattr(spec.path, "feed_per_rev", None)
+    if f is not None and spec.kind not in SPIRAL_KINDS:
+        return float(f)
+    path = spec.path
+    t_rev = 2 * math.pi / path.angular_speed
+    tg = np.linspace(0.0, float(path.duration), 4097)
+    ta = tg[tg + t_rev <= path.duration]
+    if ta.size == 0:
+        return float(f) if f is not None else 0.0
+    dr = np.abs(np.asarray(path.radius_at(ta), float)
+                - np.asarray(path.radius_at(ta + t_rev), float))
+    return float(np.median(dr))
 
 
 def spiral_pass_times(spec, r: np.ndarray, theta: np.ndarray) -> np.ndarray:
