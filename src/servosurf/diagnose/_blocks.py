@@ -761,6 +761,11 @@ class PointsBlock(Block):
         Model the noise weighting and nuisance columns are built at.
     grid : tuple, optional
         ``(shape, flat_index)`` of a map, for pictures.
+    along : ndarray of shape (n,), optional
+        Position along a profile in m.
+    form_order : int, default: 1
+        Order of the polynomial form profiled out with the nuisance (1: piston
+        and tilt; higher: a form the instrument removed from the recording).
     """
 
     #: what the heights depend on (the lines are projected out of the residual)
@@ -784,8 +789,12 @@ class PointsBlock(Block):
         p0: Model,
         grid=None,
         along: np.ndarray | None = None,
+        form_order: int = 1,
     ) -> None:
         from ._surface import PointSet
+
+        #: polynomial order of the form profiled out (1: piston and tilt)
+        self.form_order = int(form_order)
 
         super().__init__(
             recording=name,
@@ -876,10 +885,13 @@ class PointsBlock(Block):
         x, y = self.pts.x, self.pts.y
         cols = [np.ones_like(x)]
         if self.kind == "surface":
-            cols += [(x - x.mean()) / 1e-3, (y - y.mean()) / 1e-3]
+            u, v = (x - x.mean()) / 1e-3, (y - y.mean()) / 1e-3
+            cols += [u ** (k - j) * v ** j for k in range(1, self.form_order + 1)
+                     for j in range(k + 1)]
         else:
             s = self.along[self.keep] if self.along is not None else x
-            cols += [(s - s.mean()) / 1e-3]
+            u = (s - s.mean()) / 1e-3
+            cols += [u ** k for k in range(1, self.form_order + 1)]
         # lateral registration: derivative of the model heights along x and y
         from ._surface import PointSet, surface_heights
 

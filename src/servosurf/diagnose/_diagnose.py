@@ -263,8 +263,15 @@ def _make_blocks(man: Manifest, ctx: Context, p: Model) -> list:
             x, y, z, grid, along = _points_of(rec, case)
             if z.size < 16:
                 raise ConfigError(f"{rec.path}: fewer than 16 valid points")
+            order = rec.options.get("form-order", 1)
+            if isinstance(order, bool) or not isinstance(order, int) or not (
+                    1 <= order <= 6):
+                raise ConfigError(
+                    f"{rec.path}: form-order = {order!r}; allowed: an integer "
+                    "1..6 (polynomial order the instrument removed, 1: tilt)")
             blocks.append(
-                PointsBlock(ctx, rec.name, rec.kind, x, y, z, p, grid=grid, along=along)
+                PointsBlock(ctx, rec.name, rec.kind, x, y, z, p, grid=grid,
+                            along=along, form_order=order)
             )
     return blocks
 

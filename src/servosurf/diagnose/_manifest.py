@@ -49,7 +49,10 @@ not know). The record is assumed anti-aliased.
     A surface without ``x0``/``y0`` is centred on the toolpath's field. A profile
     follows a straight line (keys ``start = [x, y]`` in m and ``direction`` in rad,
     default: through the field centre along the cutting direction) or a circle
-    (key ``radius`` in m, optional ``angle-start`` in rad).
+    (key ``radius`` in m, optional ``angle-start`` in rad). ``form-order = K``
+    (default 1: piston and tilt) says the instrument removed a polynomial form of
+    that order from the recording (a profile exported "form removed"): the
+    diagnosis profiles out the same polynomial from data and model.
 """
 
 from __future__ import annotations
@@ -112,6 +115,7 @@ _ALIASES = {
 }
 _REC_KEYS = {
     "path",
+    "form-order",
     "kind",
     "name",
     "condition",
