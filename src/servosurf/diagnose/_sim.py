@@ -264,14 +264,24 @@ class CaseModel:
         are tracking and vibration).
         """
         spec = self.toolpath
-        ref = spec.path.z_at(t)
+        t = np.asarray(t, dtype=float)
+        # the command (a design path's nose-compensated tip heights are costly)
+        # and the unit-pressure design force are the same for every model
+        key = ("command", float(t[0]), int(t.size), float(t[-1]))
+        if key not in self._cache:
+            if len(self._cache) > 8:
+                self._cache.clear()
+            self._cache[key] = spec.path.z_at(t)
+        ref = self._cache[key]
         if spec.kind == "facing":
             return self.simulate(p, reference=ref, force=self.facing_force(p, t))
         if spec.kind == "surface":
             from ..simulation import design_force
 
-            return self.simulate(p, reference=ref, force=design_force(
-                spec.path, spec.tool, self.kt(p), t))
+            fkey = ("design_force",) + key[1:]
+            if fkey not in self._cache:
+                self._cache[fkey] = design_force(spec.path, spec.tool, 1.0, t)
+            return self.simulate(p, reference=ref, force=self.kt(p) * self._cache[fkey])
         if spec.kind == "nc":
             return self.simulate(p, reference=ref)
         return self.simulate(p, reference=ref, chip=True)
