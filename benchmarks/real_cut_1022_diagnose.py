@@ -12,11 +12,15 @@ refused candidates and where the residual is.
 
 Decisions (the data leave them open, see ``../shared/data/upm_sts/SOURCES.md``):
 
-* **Machine**: the diagnosis models the seed paper's FTS loop, so the case's
-  machine is ``seed-prototype`` at its own bandwidth; the program's blocks run at
-  the example's time base (1 ms a block, 0.72 s a revolution), at which the loop
-  follows the slow STS commands to well under a nanometre: the model is the
-  kinematic envelope of the blocks with the loop's small lag.
+* **Machine and time base**: the diagnosis models the seed paper's FTS loop, so
+  the case's machine is ``seed-prototype`` at its own bandwidth. The program runs
+  in inverse time with no usable time base; the NC TOML written beside the
+  manifest (program in ``../shared``, tip reference, counter-clockwise, nose
+  radius 189.36 um as ``examples/real_cut/1022.toml``) gives it 0.1 ms a block
+  (72 ms a revolution), at which the loop follows the slow STS commands to a
+  fraction of a nanometre: the model is the kinematic envelope of the blocks
+  with the loop's small lag, on a record ten times shorter than at the
+  example's 1 ms (each model evaluation simulates the loop over it).
 * **Form**: the WLI export has its form removed, so the manifest says
   ``form-order = 4`` (the sphere of radius 10.99 mm over the profile's +-0.46 mm
   is a quadratic plus a 4 nm quartic): data and model lose the same polynomial.
@@ -42,8 +46,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared" / "data" / "upm_sts" / "1022"
 PROFILE = SHARED / "1022-WLI-2D.csv"
-TOOLPATH = ROOT / "examples" / "real_cut" / "1022.toml"
+PROGRAM = SHARED / "1022-spiralPath20230418T214917.nc"
 MACHINE = "seed-prototype"
+#: s per block: 72 ms a revolution (833 rpm); the program gives no time base
+BLOCK_TIME = 1e-4
+#: the planner's fit of the measured edge of diamond D906, m (SOURCES.md)
+NOSE_RADIUS = 189.36e-6
 #: polynomial order of the form removed from the WLI export (sphere -> order 4)
 FORM_ORDER = 4
 
@@ -99,16 +107,29 @@ def register(case, s: np.ndarray, z: np.ndarray, *, span: float = 60e-6,
             "axis_on_profile_m": float(sa)}
 
 
+def write_toolpath(folder: Path) -> Path:
+    """The NC TOML of case 1022 with this benchmark's time base."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "1022_nc.toml"
+    path.write_text(
+        'kind = "nc"\ndescription = "1022: concave sphere, STS spiral"\n[nc]\n'
+        f'program = "{PROGRAM.as_posix()}"\nblock-time = {BLOCK_TIME!r}  # s\n'
+        'reference = "tip"\nrotation = "ccw"\n'
+        f"[tool]\nnose-radius = {NOSE_RADIUS!r}  # m\n")
+    return path
+
+
 def write_manifest(folder: Path, reg: dict) -> Path:
     """The profile-only manifest of case 1022 (paths into ../shared)."""
-    phi, sa = reg["azimuth_rad"], reg["axis_on_profile_m"]
+    phi, sa = float(reg["azimuth_rad"]), float(reg["axis_on_profile_m"])
     start = (-sa * math.cos(phi), -sa * math.sin(phi))
+    toolpath = write_toolpath(folder)
     text = (
         "# Case 1022 (../shared/data/upm_sts/SOURCES.md): the WLI profile through\n"
         "# the centre against the NC program's spiral (benchmarks/"
         "real_cut_1022_diagnose.py)\n"
         f'[case]\nmachine = "{MACHINE}"\n'
-        f'toolpath = "{TOOLPATH.as_posix()}"\n\n'
+        f'toolpath = "{toolpath.as_posix()}"\n\n'
         f'[[recording]]\npath = "{PROFILE.as_posix()}"\nkind = "profile"\n'
         f"start = [{start[0]!r}, {start[1]!r}]  # m, the profile's s = 0\n"
         f"direction = {phi!r}  # rad, registered azimuth of the line\n"

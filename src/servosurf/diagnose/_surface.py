@@ -49,6 +49,10 @@ SPIRAL_KINDS = ("surface", "nc")
 MAX_SIDE_PASSES = 40
 
 
+#: spiral geometry of the last few paths, by identity: (path, tool, result)
+_GEOMETRY: list = []
+
+
 def _spiral_geometry(spec) -> tuple[np.ndarray, np.ndarray, int]:
     """Radius table ``(t, r)`` of a spiral path and the passes per side to check.
 
@@ -56,6 +60,16 @@ def _spiral_geometry(spec) -> tuple[np.ndarray, np.ndarray, int]:
     ``R sin(slope)`` (the radial slope of the commanded path between revolutions)
     plus one feed of the pass whose tip radius is the point's.
     """
+    for path, tool, out in _GEOMETRY:
+        if path is spec.path and tool is spec.tool:
+            return out
+    out = _spiral_geometry_of(spec)
+    _GEOMETRY.insert(0, (spec.path, spec.tool, out))
+    del _GEOMETRY[4:]
+    return out
+
+
+def _spiral_geometry_of(spec) -> tuple[np.ndarray, np.ndarray, int]:
     path = spec.path
     w = path.angular_speed
     t_rev = 2 * math.pi / w

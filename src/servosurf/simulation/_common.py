@@ -149,21 +149,21 @@ def deviation_samples(spec, tool, fs: float, *, radii: tuple[float, float] | Non
     fs : float
         Controller sample rate in Hz.
     radii : tuple of float, optional
-        ``(rlo, rhi)`` in m: a radial range whose cutting span is covered too (the
-        points of a measured map or profile outside the field).
+        ``(rlo, rhi)`` in m: the radial range of the points to cover instead of
+        the field's (a measured map or profile; for the field's own pixel
+        centres the record is the same).
 
     Returns
     -------
     tuple of int
         ``(k0, n)``: first sample index (times ``k / fs`` in s) and sample count.
     """
-    t0, t1 = cutting_span(spec, tool)
+    span = None
     if radii is not None:
         reach = _reach(spec, tool)
-        extra = spec.path.time_span_for_radius(max(radii[0] - reach, 0.0),
-                                               radii[1] + reach)
-        if extra is not None:
-            t0, t1 = min(t0, extra[0]), max(t1, extra[1])
+        span = spec.path.time_span_for_radius(max(radii[0] - reach, 0.0),
+                                              radii[1] + reach)
+    t0, t1 = cutting_span(spec, tool) if span is None else span
     k0 = int(np.floor((t0 - SETTLE_TIME) * fs))
     if spec.kind != "nc":  # an NC path holds its first point before t = 0
         k0 = max(k0, 0)
