@@ -168,15 +168,21 @@ def _summary(r: dict) -> list[str]:
         f"{reg['axis_on_profile_m'] * 1e6:.1f} um on the profile, correlation "
         f"{reg['correlation']:.3f}",
         f"verdict: {d.get('verdict')}",
-        f"fit: {json.dumps(d.get('fit_percent', d.get('fit')), default=str)}",
+        f"fit: {d.get('fit_before_percent'):.2f} % nominal -> "
+        f"{d.get('fit_after_percent'):.2f} % fitted; unexplained share "
+        f"{d.get('unexplained_power_fraction'):.2f}",
     ]
     for e in d.get("explanations", []):
         lines.append(f"explanation: {e.get('effect')} {e.get('parameters')} "
                      f"dBIC {e.get('delta_bic')}")
-    for e in d.get("refused", d.get("refused_candidates", [])) or []:
-        lines.append(f"refused: {json.dumps(e, default=str)[:300]}")
+    for e in d.get("refused", []):
+        lines.append(f"refused: {e['effect']} {e['parameters']}: {e['reason']}")
     for m in d.get("mismatches", []):
-        lines.append(f"residual: {json.dumps(m, default=str)[:300]}")
+        lines.append(f"mismatch (nominal): {m['where']} ({m['test']}, -log10 p "
+                     f"{m['significance']})")
+    for m in d.get("remainder", []):
+        lines.append(f"residual after the fit: {m['where']} ({m['test']}, -log10 p "
+                     f"{m['significance']})")
     return lines
 
 
