@@ -183,3 +183,17 @@ def test_example_channels_are_consistent(manifest, example_recordings, capsys):
     assert verdict["verdict"] == "consistent", (verdict["verdict"],
                                                 verdict.get("mismatches"))
     assert not verdict["mismatches"]
+
+
+@pytest.mark.parametrize("order", ["0", "7", "2.5", '"two"'])
+def test_form_order_out_of_range_is_one_line(order, tmp_path, capsys):
+    """``form-order`` (the polynomial an instrument removed) is an integer 1..6."""
+    np.savez(tmp_path / "p.npz", z=np.zeros(64), dx=1e-6)
+    (tmp_path / "m.toml").write_text(
+        'toolpath = "lenslet_5um"\n[[recording]]\npath = "p.npz"\n'
+        f'kind = "profile"\nform-order = {order}\n')
+    assert main(["diagnose", str(tmp_path / "m.toml"), "--out",
+                 str(tmp_path / "d")]) == 1
+    err = capsys.readouterr().err
+    assert "form-order" in err and "1..6" in err
+    assert err.count("\n") == 1
