@@ -62,8 +62,9 @@ def _detrend(s: np.ndarray, z: np.ndarray, order: int) -> np.ndarray:
     return z - a @ np.linalg.lstsq(a, z, rcond=None)[0]
 
 
-def register(case, s: np.ndarray, z: np.ndarray, *, span: float = 60e-6,
-             n_azimuth: int = 64) -> dict:
+def register(
+    case, s: np.ndarray, z: np.ndarray, *, span: float = 60e-6, n_azimuth: int = 64
+) -> dict:
     """The line through the axis (azimuth, axis position on the profile, m)
     whose nominal model profile correlates best with the measured one."""
     from servosurf.diagnose._blocks import Context
@@ -103,8 +104,11 @@ def register(case, s: np.ndarray, z: np.ndarray, *, span: float = 60e-6,
             if c > best[0]:
                 best = (c, phi, sa)
     c, phi, sa = best
-    return {"correlation": c, "azimuth_rad": float(phi % (2 * math.pi)),
-            "axis_on_profile_m": float(sa)}
+    return {
+        "correlation": c,
+        "azimuth_rad": float(phi % (2 * math.pi)),
+        "axis_on_profile_m": float(sa),
+    }
 
 
 def write_toolpath(folder: Path) -> Path:
@@ -115,7 +119,8 @@ def write_toolpath(folder: Path) -> Path:
         'kind = "nc"\ndescription = "1022: concave sphere, STS spiral"\n[nc]\n'
         f'program = "{PROGRAM.as_posix()}"\nblock-time = {BLOCK_TIME!r}  # s\n'
         'reference = "tip"\nrotation = "ccw"\n'
-        f"[tool]\nnose-radius = {NOSE_RADIUS!r}  # m\n")
+        f"[tool]\nnose-radius = {NOSE_RADIUS!r}  # m\n"
+    )
     return path
 
 
@@ -133,7 +138,8 @@ def write_manifest(folder: Path, reg: dict) -> Path:
         f'[[recording]]\npath = "{PROFILE.as_posix()}"\nkind = "profile"\n'
         f"start = [{start[0]!r}, {start[1]!r}]  # m, the profile's s = 0\n"
         f"direction = {phi!r}  # rad, registered azimuth of the line\n"
-        f"form-order = {FORM_ORDER}  # the WLI export's form removed\n")
+        f"form-order = {FORM_ORDER}  # the WLI export's form removed\n"
+    )
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "manifest.toml"
     path.write_text(text)
@@ -150,8 +156,9 @@ def run(out: Path) -> dict:
     s = prof.x0 + prof.dx * np.arange(z.size)
     ok = np.isfinite(z)
     # a first manifest (any line) gives the case; the registration needs it only
-    tmp = write_manifest(out, {"azimuth_rad": 0.0,
-                               "axis_on_profile_m": 0.5 * (s[0] + s[-1])})
+    tmp = write_manifest(
+        out, {"azimuth_rad": 0.0, "axis_on_profile_m": 0.5 * (s[0] + s[-1])}
+    )
     case = build_case(load_manifest(tmp))
     reg = register(case, s[ok], z[ok])
     manifest = write_manifest(out, reg)
@@ -173,16 +180,22 @@ def _summary(r: dict) -> list[str]:
         f"{d.get('unexplained_power_fraction'):.2f}",
     ]
     for e in d.get("explanations", []):
-        lines.append(f"explanation: {e.get('effect')} {e.get('parameters')} "
-                     f"dBIC {e.get('delta_bic')}")
+        lines.append(
+            f"explanation: {e.get('effect')} {e.get('parameters')} "
+            f"dBIC {e.get('delta_bic')}"
+        )
     for e in d.get("refused", []):
         lines.append(f"refused: {e['effect']} {e['parameters']}: {e['reason']}")
     for m in d.get("mismatches", []):
-        lines.append(f"mismatch (nominal): {m['where']} ({m['test']}, -log10 p "
-                     f"{m['significance']})")
+        lines.append(
+            f"mismatch (nominal): {m['where']} ({m['test']}, -log10 p "
+            f"{m['significance']})"
+        )
     for m in d.get("remainder", []):
-        lines.append(f"residual after the fit: {m['where']} ({m['test']}, -log10 p "
-                     f"{m['significance']})")
+        lines.append(
+            f"residual after the fit: {m['where']} ({m['test']}, -log10 p "
+            f"{m['significance']})"
+        )
     return lines
 
 

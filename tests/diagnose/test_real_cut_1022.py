@@ -33,7 +33,8 @@ AT_BOUND = 1e-3
 pytestmark = pytest.mark.skipif(
     not (SHARED / "1022-WLI-2D.csv").is_file()
     or not (SHARED / "1022-spiralPath20230418T214917.nc").is_file(),
-    reason="../shared/data/upm_sts/1022 is absent")
+    reason="../shared/data/upm_sts/1022 is absent",
+)
 
 
 def _bench():
@@ -88,15 +89,20 @@ def test_real_cut_1022_no_explanation_at_a_bound(result):
 @pytest.mark.xfail(
     strict=False,
     reason="held-out acceptance (issue 19 item 3) is not in this branch: 1022 is "
-    "'explained' by a thermal-drift rate with no held-out improvement reported")
+    "'explained' by a thermal-drift rate with no held-out improvement reported",
+)
 def test_real_cut_1022_verdict_is_held_out_or_located(result):
     d = result["diagnosis"]
     if d["verdict"] == "explained":
         assert d["explanations"]
-        assert all(float(e.get("held_out_improvement", 0.0)) > 0
-                   for e in d["explanations"]), d["explanations"]
+        assert all(
+            float(e.get("held_out_improvement", 0.0)) > 0 for e in d["explanations"]
+        ), d["explanations"]
     else:
         assert d["verdict"] in ("unexplained", "partly-explained"), d["verdict"]
-        located = [m for m in d["mismatches"] + d["remainder"]
-                   if m["domain"] == "profile" and m["where"]]
+        located = [
+            m
+            for m in d["mismatches"] + d["remainder"]
+            if m["domain"] == "profile" and m["where"]
+        ]
         assert located, d

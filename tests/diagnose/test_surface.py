@@ -33,16 +33,18 @@ def _spec(name, tmp_path):
     if name == "nc":
         return load_toolpath(write_nc_spiral(tmp_path))
     spec = load_toolpath(builtin_toolpaths()[name])
-    return dataclasses.replace(spec, field=dataclasses.replace(spec.field, nx=40,
-                                                               ny=24))
+    return dataclasses.replace(
+        spec, field=dataclasses.replace(spec.field, nx=40, ny=24)
+    )
 
 
 @pytest.mark.parametrize("name", ["sphere", "lenslet_array_hex", "nc"])
 def test_nominal_map_is_simulates_map(name, tmp_path):
     spec = _spec(name, tmp_path)
     parts = ("tracking",) if spec.kind == "nc" else ("tracking", "force")
-    res = simulate(spec, parts=parts, instrument="none", seed=0,
-                   machine="seed-prototype")
+    res = simulate(
+        spec, parts=parts, instrument="none", seed=0, machine="seed-prototype"
+    )
     s = res.surface
     case = CaseModel(res.machine, spec)
     ctx = Context(case)

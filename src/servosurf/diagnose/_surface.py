@@ -80,7 +80,8 @@ def _spiral_geometry_of(spec) -> tuple[np.ndarray, np.ndarray, int]:
     if ta.size < 2:
         return tg, rg, 2
     dr = np.asarray(path.radius_at(ta), float) - np.asarray(
-        path.radius_at(ta + t_rev), float)
+        path.radius_at(ta + t_rev), float
+    )
     dz = np.asarray(path.z_at(ta + t_rev), float) - np.asarray(path.z_at(ta), float)
     feed = np.abs(dr)
     moving = feed > 1e-12
@@ -106,8 +107,10 @@ def feed_per_rev(spec) -> float:
     ta = tg[tg + t_rev <= path.duration]
     if ta.size == 0:
         return float(f) if f is not None else 0.0
-    dr = np.abs(np.asarray(path.radius_at(ta), float)
-                - np.asarray(path.radius_at(ta + t_rev), float))
+    dr = np.abs(
+        np.asarray(path.radius_at(ta), float)
+        - np.asarray(path.radius_at(ta + t_rev), float)
+    )
     return float(np.median(dr))
 
 
@@ -140,7 +143,8 @@ def spiral_pass_times(spec, r: np.ndarray, theta: np.ndarray) -> np.ndarray:
     else:
         raise ConfigError(
             f"toolpath {spec.kind!r}: its tip radius goes both in and out; the "
-            "diagnosis models maps of a spiral that moves one way")
+            "diagnosis models maps of a spiral that moves one way"
+        )
     two_pi = 2 * math.pi
     th0 = float(path.theta0)
     frac = np.mod(theta - th0, two_pi)
@@ -252,9 +256,9 @@ class ToolTrajectory:
         return np.interp(tt, self.t, self.x1)
 
 
-def trajectory_samples(case: CaseModel, *, periods: int = 12,
-                       radii: tuple[float, float] | None = None
-                       ) -> tuple[int, int, float | None]:
+def trajectory_samples(
+    case: CaseModel, *, periods: int = 12, radii: tuple[float, float] | None = None
+) -> tuple[int, int, float | None]:
     """The loop record the surface model is built from.
 
     Lenslet and facing paths are periodic after the start-up: ``periods`` lenslet
@@ -287,7 +291,11 @@ def trajectory_samples(case: CaseModel, *, periods: int = 12,
 
 
 def tool_trajectory(
-    case: CaseModel, p: Model, *, periods: int = 12, sim: dict | None = None,
+    case: CaseModel,
+    p: Model,
+    *,
+    periods: int = 12,
+    sim: dict | None = None,
     radii: tuple[float, float] | None = None,
 ) -> ToolTrajectory:
     """Simulate the cut of the case's toolpath under ``p`` (deterministic part).
