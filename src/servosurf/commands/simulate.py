@@ -353,17 +353,21 @@ def _write_manifest(args, res, surf, map_file, out):
     test, and a measured map put in its place is diagnosed against this case.
 
     Written for the toolpath kinds the diagnosis models, when the toolpath file
-    describes the run (no ``--tool``/``--tool-radius`` override); None otherwise.
+    describes the run (no ``--tool``/``--tool-radius`` override) and the tool
+    height comes from the FTS loop (not a kinematic run, not another Z axis);
+    None otherwise.
     """
     from pathlib import Path
 
     from .._builtins import resolve_file
     from ..diagnose import DIAGNOSABLE_TOOLPATHS, simulation_manifest
-    from ..simulation import DEFAULT_PARTS
+    from ..simulation import DEFAULT_PARTS, KINEMATIC
 
     if res.spec.kind not in DIAGNOSABLE_TOOLPATHS or args.tool or (
             args.tool_radius is not None):
         return None
+    if res.machine.axis.model != "fts" or KINEMATIC in res.settings.get("parts", ()):
+        return None  # the diagnosis models the FTS loop
     tp = Path(args.toolpath)  # a file given: its absolute path; a built-in: its name
     tp = str(tp.resolve()) if tp.is_file() else resolve_file(
         args.toolpath, kind="toolpath").stem
@@ -374,11 +378,15 @@ def _write_manifest(args, res, surf, map_file, out):
 
     st = res.settings
     parts = tuple(st.get("parts", DEFAULT_PARTS))
-    note = "" if parts == tuple(DEFAULT_PARTS) else (
+    # an NC program on the FTS: tracking and vibration (no chip force)
+    modelled = (("tracking", "vibration") if res.spec.kind == "nc"
+                else tuple(DEFAULT_PARTS))
+    note = "" if parts == modelled else (
         f"simulated with parts {', '.join(parts)}; the diagnosis models "
-        f"{', '.join(DEFAULT_PARTS)}")
+        f"{', '.join(modelled)}")
+    machine = where(args.machine)
     text = simulation_manifest(
-        toolpath=str(tp), recording=Path(map_file).name, machine=where(args.machine),
+        toolpath=str(tp), recording=Path(map_file).name, machine=machine,
         bandwidth=st.get("bandwidth_hz"), moving_mass=st.get("moving_mass_kg"),
         workpiece=where(args.workpiece), x0=surf.x0, y0=surf.y0, note=note)
     path = out / "manifest.toml"
@@ -461,6 +469,10 @@ def _finish_nc(args, res, tp, fmt, out, edge=None) -> int:
             files["tool_edge_png"] = str(edge.plot(out / "tool_edge.png"))
             summary["tool_edge"] = {**edge.summary(),
                                     "compensated": bool(args.edge_compensated)}
+        if tp.suffix.lower() == ".toml":  # the NC TOML describes the whole run
+            manifest = _write_manifest(args, res, surf, files["map"], out)
+            if manifest is not None:
+                files["manifest"] = str(manifest)
     summary.update(settings=res.settings, files=files, input_file=str(tp))
     write_json(out / "summary.json", summary)
     if args.json:

@@ -273,6 +273,8 @@ class Context:
     def __init__(self, case: CaseModel) -> None:
         self.case = case
         self._memo: dict = {}
+        #: radial range (m) of the points of maps and profiles (spiral paths)
+        self.radii: tuple[float, float] | None = None
 
     def memo(self, key, fn):
         """Return ``fn()`` cached under ``key`` (a small LRU of simulations)."""
@@ -309,26 +311,24 @@ class Context:
 
     def trajectory(self, p: Model):
         """Deterministic tool trajectory of the toolpath under ``p``."""
-        from ._surface import tool_trajectory
+        from ._surface import tool_trajectory, trajectory_samples
 
-        spec = self.case.toolpath
-        period = 1.0 / spec.path.frequency if spec.kind == "lenslet" else 0.01
-        n = (
-            int(
-                round(
-                    min(
-                        12 * period if spec.kind == "lenslet" else 0.12,
-                        spec.path.duration,
-                    )
-                    * self.case.fs
-                )
-            )
-            + 2
-        )
+        k0, n, _ = trajectory_samples(self.case, radii=self.radii)
         return self.memo(
-            (p.key(SIM_GROUPS), "traj"),
-            lambda: tool_trajectory(self.case, p, sim=self.cut_sim(p, n)),
+            (p.key(SIM_GROUPS), "traj", k0, n),
+            lambda: tool_trajectory(self.case, p, sim=self.cut_sim(p, n, k0),
+                                    radii=self.radii),
         )
+
+    def cover(self, r: np.ndarray) -> None:
+        """Widen the trajectory of a spiral path to points at radii ``r`` (m)."""
+        r = np.asarray(r, dtype=float)
+        if r.size == 0:
+            return
+        lo, hi = float(r.min()), float(r.max())
+        if self.radii is not None:
+            lo, hi = min(lo, self.radii[0]), max(hi, self.radii[1])
+        self.radii = (lo, hi)
 
 
 class Block:
@@ -776,6 +776,11 @@ class PointsBlock(Block):
         Model the noise weighting and nuisance columns are built at.
     grid : tuple, optional
         ``(shape, flat_index)`` of a map, for pictures.
+    along : ndarray of shape (n,), optional
+        Position along a profile in m.
+    form_order : int, default: 1
+        Order of the polynomial form profiled out with the nuisance (1: piston
+        and tilt; higher: a form the instrument removed from the recording).
     """
 
     #: what the heights depend on (the lines are projected out of the residual)
@@ -799,8 +804,12 @@ class PointsBlock(Block):
         p0: Model,
         grid=None,
         along: np.ndarray | None = None,
+        form_order: int = 1,
     ) -> None:
         from ._surface import PointSet
+
+        #: polynomial order of the form profiled out (1: piston and tilt)
+        self.form_order = int(form_order)
 
         super().__init__(
             recording=name,
@@ -813,6 +822,7 @@ class PointsBlock(Block):
         self.x_all, self.y_all = x, y
         self.z_all = z
         case = ctx.case
+        ctx.cover(np.hypot(x, y))
         pts = PointSet(case, x, y)
         traj = ctx.trajectory(p0)
         from ._surface import surface_heights
@@ -836,8 +846,8 @@ class PointsBlock(Block):
             kd = surface_heights(case, PointSet(case, x + ddx, y + ddy), p0, traj,
                                  return_pass=True)[1]
             near_edge |= (kd >= 0) != cut
-        keep = (~(np.abs(hmin) < EDGE_MARGIN) & ~(cut & ambiguous) & ~near_edge
-                & ~self._near_border(x, y))
+        keep = (~(np.abs(hmin - case.top) < EDGE_MARGIN) & ~(cut & ambiguous)
+                & ~near_edge & ~self._near_border(x, y))
         # the uncut top only carries instrument noise, piston and tilt: thin it
         unc = np.nonzero(keep & ~cut)[0]
         if unc.size > MAX_UNCUT:
@@ -890,10 +900,13 @@ class PointsBlock(Block):
         x, y = self.pts.x, self.pts.y
         cols = [np.ones_like(x)]
         if self.kind == "surface":
-            cols += [(x - x.mean()) / 1e-3, (y - y.mean()) / 1e-3]
+            u, v = (x - x.mean()) / 1e-3, (y - y.mean()) / 1e-3
+            cols += [u ** (k - j) * v ** j for k in range(1, self.form_order + 1)
+                     for j in range(k + 1)]
         else:
             s = self.along[self.keep] if self.along is not None else x
-            cols += [(s - s.mean()) / 1e-3]
+            u = (s - s.mean()) / 1e-3
+            cols += [u ** k for k in range(1, self.form_order + 1)]
         # lateral registration: derivative of the model heights along x and y
         from ._surface import PointSet, surface_heights
 

@@ -167,6 +167,11 @@ def build_case(man: Manifest) -> CaseModel:
         run = RunConfig(machine=str(man.machine), bandwidth=man.bandwidth,
                         mass=man.moving_mass, disturbances=man.disturbances or None)
     m = run.machine_model()
+    if m.axis.model != "fts":
+        raise ConfigError(
+            f"{man.path}: machine {m.name!r} has a {m.axis.model!r} Z axis; the "
+            "diagnosis models the seed paper's FTS loop (give case.machine an FTS "
+            "machine, e.g. \"seed-prototype\")")
     tp = load_toolpath(man.toolpath) if man.toolpath is not None else None
     from ..errors import ModelError
 
@@ -263,8 +268,15 @@ def _make_blocks(man: Manifest, ctx: Context, p: Model) -> list:
             x, y, z, grid, along = _points_of(rec, case)
             if z.size < 16:
                 raise ConfigError(f"{rec.path}: fewer than 16 valid points")
+            order = rec.options.get("form-order", 1)
+            if isinstance(order, bool) or not isinstance(order, int) or not (
+                    1 <= order <= 6):
+                raise ConfigError(
+                    f"{rec.path}: form-order = {order!r}; allowed: an integer "
+                    "1..6 (polynomial order the instrument removed, 1: tilt)")
             blocks.append(
-                PointsBlock(ctx, rec.name, rec.kind, x, y, z, p, grid=grid, along=along)
+                PointsBlock(ctx, rec.name, rec.kind, x, y, z, p, grid=grid,
+                            along=along, form_order=order)
             )
     return blocks
 

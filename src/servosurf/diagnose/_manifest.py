@@ -58,7 +58,10 @@ not know). The record is assumed anti-aliased.
     A surface without ``x0``/``y0`` is centred on the toolpath's field. A profile
     follows a straight line (keys ``start = [x, y]`` in m and ``direction`` in rad,
     default: through the field centre along the cutting direction) or a circle
-    (key ``radius`` in m, optional ``angle-start`` in rad).
+    (key ``radius`` in m, optional ``angle-start`` in rad). ``form-order = K``
+    (default 1: piston and tilt) says the instrument removed a polynomial form of
+    that order from the recording (a profile exported "form removed"): the
+    diagnosis profiles out the same polynomial from data and model.
 """
 
 from __future__ import annotations
@@ -85,9 +88,10 @@ __all__ = [
     "simulation_manifest",
 ]
 
-#: Toolpath kinds whose maps and profiles the diagnosis models (a design surface
-#: and an NC program are simulated, not yet diagnosed).
-DIAGNOSABLE_TOOLPATHS = ("lenslet", "facing")
+#: Toolpath kinds whose maps and profiles the diagnosis models: every kind
+#: ``servosurf simulate`` cuts (design surfaces and NC programs through their
+#: spiral passes, on an FTS machine).
+DIAGNOSABLE_TOOLPATHS = ("lenslet", "facing", "surface", "nc")
 
 #: Recording kinds accepted in a manifest (:data:`servosurf.io.RECORDING_KINDS`).
 KINDS = RECORDING_KINDS
@@ -148,6 +152,9 @@ class RecordingTable:
     y0: float | None = param(
         None, unit="m", doc="y of the map's pixel (0, 0) in the workpiece frame")
     description: str | None = param(None, doc="free text")
+    # checked where it is used (integer 1..6, diagnose's build of the map block)
+    form_order: Any = param(None, doc="order of the polynomial form the instrument "
+                            "removed from a map or profile (1..6; default 1)")
 
 
 def _keys(cls) -> set[str]:

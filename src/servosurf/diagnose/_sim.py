@@ -29,6 +29,8 @@ Decisions (documented here once):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .. import _hooks
@@ -85,6 +87,11 @@ class CaseModel:
         self.loop = ServoLoop(machine)
         self.pidf: PIDF = self.loop.pidf
         self.fs = float(machine.controller.sample_rate)
+        #: pre-cut height in m the surface model clips at: the flat face at 0, no
+        #: material limit (+inf) for an NC program (as
+        #: :func:`servosurf.simulation.simulate` sweeps it)
+        self.top = (math.inf if toolpath is not None and toolpath.kind == "nc"
+                    else 0.0)
         self._cache: dict = {}
 
     # ------------------------------------------------------------ hooks
@@ -261,11 +268,32 @@ class CaseModel:
 
         Lenslets: the chip force of a round tool plunging into the flat face at
         z = 0, from the actual tool height; facing: the steady feed-limited chip
-        force (see :meth:`facing_force`).
+        force (see :meth:`facing_force`); design surfaces: the finishing pass's
+        facing chip at the local feed (:func:`servosurf.simulation.design_force`);
+        NC programs: no chip force (simulate's parts for an NC program on the FTS
+        are tracking and vibration).
         """
-        ref = self.toolpath.path.z_at(t)
-        if self.toolpath.kind == "facing":
+        spec = self.toolpath
+        t = np.asarray(t, dtype=float)
+        # the command (a design path's nose-compensated tip heights are costly)
+        # and the unit-pressure design force are the same for every model
+        key = ("command", float(t[0]), int(t.size), float(t[-1]))
+        if key not in self._cache:
+            if len(self._cache) > 8:
+                self._cache.clear()
+            self._cache[key] = spec.path.z_at(t)
+        ref = self._cache[key]
+        if spec.kind == "facing":
             return self.simulate(p, reference=ref, force=self.facing_force(p, t))
+        if spec.kind == "surface":
+            from ..simulation import design_force
+
+            fkey = ("design_force",) + key[1:]
+            if fkey not in self._cache:
+                self._cache[fkey] = design_force(spec.path, spec.tool, 1.0, t)
+            return self.simulate(p, reference=ref, force=self.kt(p) * self._cache[fkey])
+        if spec.kind == "nc":
+            return self.simulate(p, reference=ref)
         return self.simulate(p, reference=ref, chip=True)
 
     def simulate(

@@ -31,11 +31,141 @@ from ._sim import CaseModel
 from .effects._base import Model
 
 __all__ = [
+    "SPIRAL_KINDS",
+    "spiral_pass_times",
+    "feed_per_rev",
     "PointSet",
     "ToolTrajectory",
     "tool_trajectory",
+    "trajectory_samples",
     "surface_heights",
 ]
+
+
+#: Toolpath kinds cut by one spiral whose passes are found from the path itself
+#: (design surfaces and NC programs): their deviation record is not periodic.
+SPIRAL_KINDS = ("surface", "nc")
+
+#: Most passes evaluated on each side of the one whose tip radius is a point's.
+MAX_SIDE_PASSES = 40
+
+
+#: spiral geometry of the last few paths, by identity: (path, tool, result)
+_GEOMETRY: list = []
+
+
+def _spiral_geometry(spec) -> tuple[np.ndarray, np.ndarray, int]:
+    """Radius table ``(t, r)`` of a spiral path and the passes per side to check.
+
+    The passes a point can be cut by lie within the tool's contact offset
+    ``R sin(slope)`` (the radial slope of the commanded path between revolutions)
+    plus one feed of the pass whose tip radius is the point's.
+    """
+    for path, tool, out in _GEOMETRY:
+        if path is spec.path and tool is spec.tool:
+            return out
+    out = _spiral_geometry_of(spec)
+    _GEOMETRY.insert(0, (spec.path, spec.tool, out))
+    del _GEOMETRY[4:]
+    return out
+
+
+def _spiral_geometry_of(spec) -> tuple[np.ndarray, np.ndarray, int]:
+    path = spec.path
+    w = path.angular_speed
+    t_rev = 2 * math.pi / w
+    dur = float(path.duration)
+    tg = np.linspace(0.0, dur, max(int(math.ceil(dur / t_rev * 256)), 2) + 1)
+    rg = np.asarray(path.radius_at(tg), dtype=float)
+    ta = tg[tg + t_rev <= dur]
+    if ta.size < 2:
+        return tg, rg, 2
+    dr = np.asarray(path.radius_at(ta), float) - np.asarray(
+        path.radius_at(ta + t_rev), float
+    )
+    dz = np.asarray(path.z_at(ta + t_rev), float) - np.asarray(path.z_at(ta), float)
+    feed = np.abs(dr)
+    moving = feed > 1e-12
+    if not moving.any():
+        return tg, rg, 2
+    f_min = float(np.percentile(feed[moving], 1.0))
+    f_max = float(feed[moving].max())
+    slope = float(np.max(np.abs(dz[moving]) / feed[moving]))
+    offset = spec.tool.nose_radius * slope / math.sqrt(1.0 + slope * slope)
+    k = int(math.ceil((offset + f_max) / max(f_min, 1e-12))) + 1
+    return tg, rg, min(max(k, 2), MAX_SIDE_PASSES)
+
+
+def feed_per_rev(spec) -> float:
+    """Radial feed per revolution in m: the path's, or for a spiral path whose feed
+    varies (:data:`SPIRAL_KINDS`) the median over its revolutions."""
+    f = getattr(spec.path, "feed_per_rev", None)
+    if f is not None and spec.kind not in SPIRAL_KINDS:
+        return float(f)
+    path = spec.path
+    t_rev = 2 * math.pi / path.angular_speed
+    tg = np.linspace(0.0, float(path.duration), 4097)
+    ta = tg[tg + t_rev <= path.duration]
+    if ta.size == 0:
+        return float(f) if f is not None else 0.0
+    dr = np.abs(
+        np.asarray(path.radius_at(ta), float)
+        - np.asarray(path.radius_at(ta + t_rev), float)
+    )
+    return float(np.median(dr))
+
+
+def spiral_pass_times(spec, r: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Times (s) the tool of a spiral path passes the angles of points.
+
+    Parameters
+    ----------
+    spec : ToolpathSpec
+        A design-surface or NC toolpath (kind in :data:`SPIRAL_KINDS`) whose tip
+        radius is monotonic in time.
+    r, theta : ndarray of shape (n,)
+        Point radii in m and angles in rad, in the path's (kernel) frame.
+
+    Returns
+    -------
+    ndarray of shape (n, passes)
+        Pass times in s around the revolution whose tip radius is the point's
+        (NaN: a pass before the path's start or after its end).
+    """
+    from ..errors import ConfigError
+
+    path = spec.path
+    tg, rg, side = _spiral_geometry(spec)
+    d = np.diff(rg)
+    if np.all(d <= 1e-15):
+        t_r = np.interp(-r, -rg, tg)
+    elif np.all(d >= -1e-15):
+        t_r = np.interp(r, rg, tg)
+    else:
+        raise ConfigError(
+            f"toolpath {spec.kind!r}: its tip radius goes both in and out; the "
+            "diagnosis models maps of a spiral that moves one way"
+        )
+    two_pi = 2 * math.pi
+    th0 = float(path.theta0)
+    frac = np.mod(theta - th0, two_pi)
+    ks = np.arange(-side, side + 1)
+    dur = float(path.duration)
+    if hasattr(path, "time_at_theta"):  # NC blocks: angle to time along the path
+        th_r = np.asarray(path.theta_at(t_r), dtype=float)
+        jc = np.rint((th_r - th0 - frac) / two_pi)
+        j = jc[:, None] + ks[None, :]
+        th_u = th0 + frac[:, None] + two_pi * j
+        t = path.time_at_theta(th_u)
+        inside = (th_u >= path.theta[0]) & (th_u <= path.theta[-1])
+    else:
+        w = path.angular_speed
+        t_rev = two_pi / w
+        phase = frac / w
+        jc = np.rint((t_r - phase) / t_rev)
+        t = phase[:, None] + (jc[:, None] + ks[None, :]) * t_rev
+        inside = (t >= 0.0) & (t <= dur)
+    return np.where(inside, t, np.nan)
 
 
 class PointSet:
@@ -62,6 +192,10 @@ class PointSet:
         if spec.kind == "lenslet":
             ks = np.arange(path.ring_count)
             t = phase[:, None] + ks[None, :] * t_rev
+        elif spec.kind in SPIRAL_KINDS:
+            # the kernel's frame (an NC path may run mirrored in y)
+            th = -self.theta if getattr(path, "mirrored", False) else self.theta
+            t = spiral_pass_times(spec, self.r, th)
         else:
             t_r = (path.r_start - self.r) / (path.feed_per_rev * path.rev_per_s)
             jc = np.rint((t_r - phase) / t_rev)
@@ -70,8 +204,11 @@ class PointSet:
             n_rev = math.floor(path.duration / t_rev)
             j = np.clip(j, 0, n_rev)
             t = phase[:, None] + j * t_rev
+        valid = np.isfinite(t)
+        t = np.where(valid, t, 0.0)
         self.t = t  # (n, passes) s
-        self.dr = self.r[:, None] - path.radius_at(t)  # (n, passes) m
+        # (n, passes) m; inf: a pass outside the path's time
+        self.dr = np.where(valid, self.r[:, None] - path.radius_at(t), np.inf)
         self.theta_pass = path.theta_at(t)  # unwrapped tool angle, rad
         self.z_cmd = path.z_at(t)
         self.half_width = spec.tool.half_width
@@ -99,8 +236,9 @@ class ToolTrajectory:
         Sample times in s (0, 1/fs, ...).
     x1 : ndarray of shape (m,)
         Tool height in m.
-    period : float
-        Period of the steady state in s (lenslet: 1/f; facing: one sample).
+    period : float or None
+        Period of the steady state in s (lenslet: 1/f; facing: one sample); None:
+        the record spans every time asked for (spiral paths), no extension.
     """
 
     def __init__(self, t: np.ndarray, x1: np.ndarray, period: float) -> None:
@@ -112,13 +250,54 @@ class ToolTrajectory:
     def __call__(self, t: np.ndarray) -> np.ndarray:
         """Tool height in m at times ``t`` (s)."""
         t = np.asarray(t, dtype=float)
+        if self.period is None:  # a record over the whole span: no extension
+            return np.interp(t, self.t, self.x1)
         start = self.t_end - self.period
         tt = np.where(t > self.t_end, start + np.mod(t - start, self.period), t)
         return np.interp(tt, self.t, self.x1)
 
 
+def trajectory_samples(
+    case: CaseModel, *, periods: int = 12, radii: tuple[float, float] | None = None
+) -> tuple[int, int, float | None]:
+    """The loop record the surface model is built from.
+
+    Lenslet and facing paths are periodic after the start-up: ``periods`` lenslet
+    periods (0.12 s of facing) from t = 0, extended periodically. A spiral path
+    (:data:`SPIRAL_KINDS`) is not: the record is simulate's own deviation record
+    (:func:`servosurf.simulation.deviation_samples`), widened to the radii of the
+    points (``radii``, m) when they reach outside the toolpath's field.
+
+    Returns
+    -------
+    tuple
+        ``(k0, n, period)``: first controller sample (loop at rest there), sample
+        count and the period in s of the extension (None: none).
+    """
+    spec = case.toolpath
+    fs = case.fs
+    if spec.kind in SPIRAL_KINDS:
+        from ..simulation import deviation_samples
+
+        k0, n = deviation_samples(spec, spec.tool, fs, radii=radii)
+        return k0, n, None
+    if spec.kind == "lenslet":
+        span = periods / spec.path.frequency
+        period = 1.0 / spec.path.frequency
+    else:
+        span = 0.12
+        period = 2.0 / fs
+    n = int(round(min(span, spec.path.duration) * fs)) + 2
+    return 0, n, period
+
+
 def tool_trajectory(
-    case: CaseModel, p: Model, *, periods: int = 12, sim: dict | None = None
+    case: CaseModel,
+    p: Model,
+    *,
+    periods: int = 12,
+    sim: dict | None = None,
+    radii: tuple[float, float] | None = None,
 ) -> ToolTrajectory:
     """Simulate the cut of the case's toolpath under ``p`` (deterministic part).
 
@@ -132,38 +311,24 @@ def tool_trajectory(
         Lenslet periods simulated before the steady state is extended (the loop
         settles to 1e-14 m in six periods).
     sim : dict, optional
-        A simulation result (``tool`` and its times from 0) to reuse.
+        A simulation result (``tool`` over the samples of
+        :func:`trajectory_samples`) to reuse.
+    radii : tuple of float, optional
+        Radial range of the points in m (spiral paths, see
+        :func:`trajectory_samples`).
 
     Returns
     -------
     ToolTrajectory
         The tool height over time.
     """
-    spec = case.toolpath
+    k0, n, period = trajectory_samples(case, periods=periods, radii=radii)
     fs = case.fs
-    if spec.kind == "lenslet":
-        period = 1.0 / spec.path.frequency
-    else:
-        period = 0.01
-    n = (
-        int(
-            round(
-                min(
-                    periods * period if spec.kind == "lenslet" else 0.12,
-                    spec.path.duration,
-                )
-                * fs
-            )
-        )
-        + 2
-    )
     if sim is not None and sim["tool"].size >= n:
-        x1 = sim["tool"]
+        x1 = sim["tool"][:n]
     else:
-        x1 = case.simulate_path(p, np.arange(n) / fs)["tool"]
-    t = np.arange(x1.size) / fs
-    if spec.kind != "lenslet":
-        period = 2.0 / fs
+        x1 = case.simulate_path(p, (k0 + np.arange(n)) / fs)["tool"]
+    t = (k0 + np.arange(x1.size)) / fs
     return ToolTrajectory(t, x1, period)
 
 
@@ -174,7 +339,7 @@ def surface_heights(
     traj: ToolTrajectory,
     *,
     noise=None,
-    top: float = 0.0,
+    top: float | None = None,
     return_pass: bool = False,
 ):
     """Heights in m of the surface at the points under ``p``.
@@ -192,8 +357,8 @@ def surface_heights(
         Deterministic tool height.
     noise : callable, optional
         ``noise(t) -> m`` stochastic tool error added to the tool height.
-    top : float, default: 0.0
-        Pre-cut height in m.
+    top : float, optional
+        Pre-cut height in m (default: the case's, :attr:`CaseModel.top`).
     return_pass : bool, default: False
         Also return the index of the active pass per point (-1 when uncut),
         the lowest tool height before clipping at ``top`` (m, inf when no pass
@@ -205,6 +370,8 @@ def surface_heights(
     ndarray of shape (n,)
         Heights in m (``top`` where no pass reaches).
     """
+    if top is None:
+        top = case.top
     t = pts.t_r
     dr = pts.dr_r
     z_tool = traj(t)

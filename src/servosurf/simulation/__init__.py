@@ -18,11 +18,13 @@ from ._common import (
     SETTLE_TIME,
     SimulationResult,
     cutting_span,
+    deviation_samples,
 )
-from ._simulate import simulate
+from ._simulate import design_force, simulate
 
 __all__ = [
     "simulate",
+    "design_force",
     "SimulationResult",
     "PARTS",
     "KINEMATIC",
@@ -31,4 +33,5 @@ __all__ = [
     "NC_MACHINE",
     "MAX_SPAN_SAMPLES",
     "cutting_span",
+    "deviation_samples",
 ]

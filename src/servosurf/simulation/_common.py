@@ -22,6 +22,7 @@ __all__ = [
     "SETTLE_TIME",
     "MAX_SPAN_SAMPLES",
     "cutting_span",
+    "deviation_samples",
 ]
 
 #: Model parts that can be switched on and off: the servo loop's deviations, then
@@ -129,6 +130,45 @@ def cutting_span(spec, tool) -> tuple[float, float]:
             "move [field] center-x/center-y onto the path"
         )
     return span
+
+
+def deviation_samples(spec, tool, fs: float, *, radii: tuple[float, float] | None = None
+                      ) -> tuple[int, int]:
+    """Controller samples of the deviation record :func:`simulate` runs the loop on.
+
+    The loop starts at rest at sample ``k0`` (:data:`SETTLE_TIME` before the first
+    moment the tool can cut the field, not before t = 0 except for an NC program,
+    which holds its first point) and runs ``n`` samples, to two past the last.
+
+    Parameters
+    ----------
+    spec : ToolpathSpec
+        The toolpath and its field.
+    tool : Tool
+        The tool.
+    fs : float
+        Controller sample rate in Hz.
+    radii : tuple of float, optional
+        ``(rlo, rhi)`` in m: the radial range of the points to cover instead of
+        the field's (a measured map or profile; for the field's own pixel
+        centres the record is the same).
+
+    Returns
+    -------
+    tuple of int
+        ``(k0, n)``: first sample index (times ``k / fs`` in s) and sample count.
+    """
+    span = None
+    if radii is not None:
+        reach = _reach(spec, tool)
+        span = spec.path.time_span_for_radius(max(radii[0] - reach, 0.0),
+                                              radii[1] + reach)
+    t0, t1 = cutting_span(spec, tool) if span is None else span
+    k0 = int(np.floor((t0 - SETTLE_TIME) * fs))
+    if spec.kind != "nc":  # an NC path holds its first point before t = 0
+        k0 = max(k0, 0)
+    k1 = int(np.ceil(t1 * fs)) + 2
+    return k0, k1 - k0
 
 
 def _kernel_field(spec):

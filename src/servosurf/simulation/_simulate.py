@@ -64,25 +64,43 @@ from ._common import (
     KINEMATIC,
     MAX_SPAN_SAMPLES,
     NC_MACHINE,
-    SETTLE_TIME,
     SimulationResult,
     _initial,
     _kernel_field,
     _measure,
     _physical,
     _reach,
-    cutting_span,
+    deviation_samples,
 )
 from ._timed_tool import has_timed_tool, timed_tool_surface
 
-__all__ = ["simulate"]
+__all__ = ["simulate", "design_force"]
 
-def _design_force(path, tool, kt: float, t: np.ndarray) -> np.ndarray:
+
+def design_force(path, tool, kt: float, t: np.ndarray) -> np.ndarray:
     """Thrust force (N) of a design-surface finishing pass at times ``t`` (s).
 
     The pre-form is taken to follow the design ``path.depth_of_cut`` higher, so the
     chip is the steady facing chip at the local feed per revolution (planned feeds
-    vary with radius), ramped in over the record's first revolution.
+    vary with radius), ramped in over the record's first revolution (from
+    ``t[0]``).
+
+    Parameters
+    ----------
+    path : DesignToolpath
+        The design surface's spiral (its ``feed_at``, ``depth_of_cut`` and
+        ``rev_per_s``).
+    tool : Tool
+        The tool (its nose radius in m).
+    kt : float
+        Specific thrust pressure in N/m^2.
+    t : ndarray of shape (n,)
+        Times in s, increasing.
+
+    Returns
+    -------
+    ndarray of shape (n,)
+        Thrust force in N.
     """
     feed = path.feed_at(t)
     levels = np.unique(feed)
@@ -217,12 +235,7 @@ def simulate(
                 f"{machine.mechanics.moving_mass:g} kg; lower --bandwidth"
             )
 
-    t0, t1 = cutting_span(spec, tool)
-    k0 = int(np.floor((t0 - SETTLE_TIME) * fs))
-    if spec.kind != "nc":  # an NC path holds its first point before t = 0
-        k0 = max(k0, 0)
-    k1 = int(np.ceil(t1 * fs)) + 2
-    n = k1 - k0
+    k0, n = deviation_samples(spec, tool, fs)
     if n > MAX_SPAN_SAMPLES:
         raise ConfigError(
             f"the field needs {n} controller samples ({n / fs:.1f} s of cutting), more "
@@ -253,7 +266,7 @@ def simulate(
                 )
             elif spec.kind == "surface":  # finishing pass: facing chip, local feed
                 cut = loop.simulate(
-                    reference=ref, force=_design_force(spec.path, tool, kt, t),
+                    reference=ref, force=design_force(spec.path, tool, kt, t),
                     nonlinearity=nonlin,
                 )
             else:  # facing: steady feed-limited chip, ramped in over one revolution

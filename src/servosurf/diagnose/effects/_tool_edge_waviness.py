@@ -29,9 +29,9 @@ def phi_reference(case) -> float:
     """Contact angle (rad) spanned by the cut: the waviness basis runs over it."""
     spec = case.toolpath
     r = spec.tool.nose_radius
-    depth = (
-        spec.path.depth_of_cut if spec.kind == "lenslet" else spec.path.feed_per_rev * 4
-    )
+    from .._surface import feed_per_rev
+
+    depth = spec.path.depth_of_cut if spec.kind == "lenslet" else feed_per_rev(spec) * 4
     half = min(math.sqrt(max(2 * r * depth - depth * depth, 0.0)), spec.tool.half_width)
     return max(math.asin(min(half / r, 1.0)), 1e-6)
 
