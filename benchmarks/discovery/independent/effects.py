@@ -16,7 +16,8 @@ limit, a capacitive-gap sensor law, a von Mises spindle bump, an edge (ploughing
 force beside the chip-area force, tool wear (nose radius growing with cutting
 length, catalogue's tool-wear), asynchronous spindle axial error (non-integer
 orders plus a narrow band, catalogue's spindle-async-error); for the loop effects
-Bouc-Wen (beta != gamma) or Dahl hysteresis, LuGre friction, rounding or truncating converters and a soft
+Bouc-Wen (beta != gamma) or Dahl hysteresis, LuGre friction, rounding or
+truncating converters and a soft
 dead zone, pickup lines in the logged following error only (one line, or mains
 harmonics with a drifting phase). Nulls:
 nominal noise, base vibration continuing below fs / 4096, noise PSDs off by a
