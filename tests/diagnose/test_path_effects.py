@@ -210,3 +210,25 @@ def test_wear_is_detected_and_named(discovery, tmp_path):
                                                    for e in ex]
     want = truth(0.3e-6)["growth"]
     assert ex[0]["parameters"]["growth"] == pytest.approx(want, rel=0.3)
+
+
+def test_cutting_speed_of_an_nc_spiral_is_the_surface_speed(tmp_path):
+    """An NC spiral at 13.9 rev/s (0.5 deg per 0.1 ms block) from r = 0.30 to
+    0.20 mm at a constant feed: the edge cuts 2 pi n mean(r) = 21.8 mm/s
+    (closed form, the radial feed neglected: 1e-5 of it)."""
+    from servosurf.diagnose.effects._tool_wear import cutting_speed
+    from servosurf.toolpath import load_toolpath
+
+    rows = []
+    for k in range(10 * 720 + 1):
+        r = 0.30 - 0.010 * k / 720
+        rows.append(f"C{(k * 0.5) % 360:.6f} X{r:.6f} Z-0.002")
+    (tmp_path / "spiral.nc").write_text("\n".join(rows) + "\n")
+    toml = tmp_path / "spiral.toml"
+    toml.write_text(
+        'kind = "nc"\n[nc]\nprogram = "spiral.nc"\nblock-time = 1e-4  # s\n'
+        'reference = "tip"\nrotation = "ccw"\n[tool]\nnose-radius = 0.5e-3  # m\n')
+    spec = load_toolpath(toml)
+    n = 0.5 / 360 / 1e-4  # rev/s
+    want = 2 * np.pi * n * 0.25e-3
+    assert cutting_speed(spec) == pytest.approx(want, rel=1e-4)

@@ -56,7 +56,8 @@ def test_recalibration_frees_the_sensor_bandwidth_around_the_nominal():
     ev = E.Evidence(fs=199.6e3, nominal=E.Nominal(
         moving_mass=0.175, flexure_stiffness=2e4, flexure_damping=2.0,
         force_constant=8.0, sensor_bandwidth=15e3))
-    m0 = recal.start(Model(), None, np.zeros(5), ev)  # every knob at its nominal
+    plant = next(c for c in recal.configs(ev, Model()) if c.label == "plant")
+    m0 = recal.start(Model(), plant, np.zeros(5), ev)  # every plant knob nominal
     frees = {f.name: f for f in recal.free(m0, 0, ev)}
     assert frees["sensor_bandwidth"].lo == 5e3 and frees["sensor_bandwidth"].hi == 45e3
     q = frees["sensor_bandwidth"].set(m0, 18e3)

@@ -1453,11 +1453,13 @@ def sampled_autocov(
 ) -> np.ndarray:
     """Autocovariance (m^2, lags ``0..n-1``) of ``output``'s noise sampled at ``fs``
     (the model PSD on a grid :data:`LEAKAGE_OVERSAMPLING` times finer than the
-    bins, as :func:`expected_periodogram`)."""
+    bins, as :func:`expected_periodogram`). A record at another rate than the
+    controller's is taken as anti-aliased: the PSD up to the lower of the two
+    Nyquist frequencies."""
     m = LEAKAGE_OVERSAMPLING * n
     fg = np.fft.rfftfreq(m, 1.0 / fs)
     sg = np.zeros(fg.shape)
-    on = fg > 0
+    on = (fg > 0) & (fg <= 0.5 * case.fs)
     sg[on] = case.noise_psd(p, fg[on], output)
     return (fs * np.fft.irfft(0.5 * sg, m))[:n]
 
@@ -1474,10 +1476,10 @@ def expected_projected_periodogram(
 ) -> np.ndarray:
     """:func:`expected_periodogram` of records with ``basis`` projected out
     (m^2/Hz at ``freq``, bins of the n-sample record). Records at another rate than
-    the controller's keep the PSD at the bins (no autocovariance of the model there)."""
+    the controller's are projected too (the projection takes most of the power of
+    the bins next to the band edge): their autocovariance is the model PSD's up to
+    the lower Nyquist frequency (:func:`sampled_autocov`)."""
     freq = np.asarray(freq, dtype=float)
-    if not same_rate(fs, case):
-        return case.noise_psd(p, freq, output)
     e = projected_periodogram_expectation(
         sampled_autocov(case, p, n, fs, output), basis, fs)
     return e[np.rint(freq * n / fs).astype(int)]

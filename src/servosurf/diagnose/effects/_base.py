@@ -371,7 +371,13 @@ class Config:
 @dataclass(frozen=True)
 class Free:
     """A free parameter of the nonlinear fit: field ``field`` of term ``slot`` of
-    effect ``effect``, searched in ``[lo, hi]`` (in log space when ``log``)."""
+    effect ``effect``, searched in ``[lo, hi]`` (in log space when ``log``).
+
+    ``located`` marks a location the effect's own search finds on all the data
+    (a line's frequency, resolved to ``1 / T`` of the longest record): the
+    leave-one-recording-out refit holds it, since the other recordings may be
+    too short to resolve it, and judges the remaining parameters (the amplitude
+    a line must show in the recording left out)."""
 
     name: str
     effect: str
@@ -380,6 +386,7 @@ class Free:
     lo: float
     hi: float
     log: bool = False
+    located: bool = False
 
     def get(self, model: Model) -> float:
         """Current value (SI)."""
@@ -553,6 +560,14 @@ class Effect:
     def groups(self) -> frozenset[str]:
         """Hook groups of the effect's parameters (the blocks it can change)."""
         return self.params.groups()
+
+    def must_beat_physics(self, cfg: Config | None = None) -> bool:
+        """Whether a term in configuration ``cfg`` pays the selection's extra
+        recalibration penalty (it must clearly beat physics). Plant
+        recalibrations do; a nuisance the model leaves out on purpose (noise
+        levels off by a factor, issue 19 item 5) must not, or a physical
+        mechanism with the same spectral reach is named in its place."""
+        return self.recalibration
 
     def n_params(self, cfg: Config | None = None) -> int:
         """Parameters counted by the selection criterion per term."""

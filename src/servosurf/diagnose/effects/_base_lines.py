@@ -193,7 +193,7 @@ class BaseLinesEffect(Effect):
         df = 1.5 * ev.fs / ev.record_length
         return [
             Free(f"frequency_{slot + 1}", NAME, slot, "frequency", max(f - df, 1.0),
-                 f + df),
+                 f + df, located=True),
             Free(f"amplitude_{slot + 1}", NAME, slot, "amplitude", 1e-16, 1e-3, True),
         ]
 

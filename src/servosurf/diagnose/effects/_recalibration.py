@@ -180,6 +180,11 @@ class RecalibrationEffect(Effect):
             return _FIELDS
         return _CONFIGS[cfg.label]
 
+    def must_beat_physics(self, cfg=None):
+        """The plant recalibration pays the extra penalty; the noise levels
+        alone do not (a nuisance, not a rival of physics)."""
+        return cfg is None or cfg.label != "noise-level"
+
     def configs(self, ev, model):
         return [Config(k) for k in _CONFIGS]
 

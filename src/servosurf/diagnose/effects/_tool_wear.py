@@ -21,16 +21,24 @@ MAX_SHARE = 0.1
 def cutting_speed(spec) -> float:
     """Mean rate (m/s) at which the edge cuts length along a toolpath: the surface
     speed times the share of the time the tool is in the material (lenslet paths:
-    the share of the FTS period below the pre-cut face; facing: always)."""
+    the share of the FTS period below the pre-cut face; facing and design spirals:
+    always; NC block paths: the arc length of the cutting blocks over their
+    duration)."""
     path = spec.path
     if spec.kind == "lenslet":
         a, d = path.amplitude, path.depth_of_cut
         # z = (a - d) - a sin(2 pi f t) < 0 while sin > (a - d) / a
         share = 0.5 - math.asin(min(max((a - d) / a, -1.0), 1.0)) / math.pi
         r = float(np.mean(path.ring_radii()))
-    else:
+    elif hasattr(path, "r_start"):
         share = 1.0
         r = 0.5 * (path.r_start + path.r_end)
+    else:
+        # NC block path: vertex arrays in time; the cut length is the arc swept
+        # (r dtheta per segment, radial feed neglected) over the path's duration.
+        r_mid = 0.5 * (path.r[1:] + path.r[:-1])
+        length = float(np.sum(r_mid * np.abs(np.diff(path.theta))))
+        return length / max(float(path.duration), 1e-12)
     return float(path.angular_speed * r * share)
 
 
