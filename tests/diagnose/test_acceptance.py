@@ -40,6 +40,7 @@ class _Free:
     def __init__(self, name):
         self.name = name
         self.lo, self.hi, self.log = -100.0, 100.0, False
+        self.located = False
 
     def get(self, q):
         return getattr(q, "a", {}).get(self.name, 0.0)
@@ -223,6 +224,20 @@ def test_leave_one_recording_out_refuses_a_signature_carried_by_one_recording():
     why = eng.recording_refusal(eff, q, t, [])
     assert why is not None and "predicted on map" in why
     assert "other recordings" in why
+
+
+def test_an_idle_spectrum_alone_does_not_predict_another_recording():
+    """The same weak map signature, but the recording that carries the line is an
+    idle spectrum: its line level is not separable from the noise level in a
+    bin, so the map is not left out to be predicted from it alone (the
+    in-sample bar still applies); the time-record version is refused above."""
+    blocks, _ = _two_recordings(0.5, seed=8, amp=1.875)
+    blocks[0].domain = "spectrum"
+    eng = Engine(blocks, None, [], None)
+    eff = _Eff("line")
+    q, t = _full_fit(eng, eff)
+    assert eng.refusal(eff, q, t) is None
+    assert eng.recording_refusal(eff, q, t, []) is None
 
 
 def _meta(sizes):

@@ -255,7 +255,15 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
 
     out, _results, key, _score = blind
     k = next(c for c in key["cases"] if c["effects"] == ["loop-delay"])
-    manifest = out / "cases" / k["case"] / "manifest.toml"
+    # the case's FRFs, idle records and map (its cut record, air cut and ring
+    # profile left out: the CLI's outputs are under test, a third of the time)
+    head, *recs = (out / "cases" / k["case"] / "manifest.toml").read_text().split(
+        "[[recording]]")
+    keep = [r for r in recs if not any(
+        name in r for name in ("aircut.", "cut.csv", "ring0."))]
+    assert len(keep) == len(recs) - 3
+    manifest = out / "cases" / k["case"] / "manifest_cli.toml"
+    manifest.write_text("[[recording]]".join([head, *keep]))
     dest = tmp_path / "diag"
     assert main(["diagnose", str(manifest), "--out", str(dest), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
@@ -390,7 +398,14 @@ def test_records_at_another_rate_are_compared_at_their_own_samples(blind):
             assert half.freq.min() >= case.fs / 4096 * (1 - 1e-9)
             lp = line_power(case, p, half.freq, fe.shape[1], fs=b.fs / 2)
             want = case.noise_psd(p, half.freq, "fe") + lp
-            np.testing.assert_allclose(half.expected(p), want, rtol=1e-12)
+            got = half.expected(p)
+            # the low-band projection takes most of the power of the bin at its
+            # edge (its exact expectation: test_nuisance); above a few bins the
+            # projected periodogram's expectation is the PSD seen through the
+            # Fejer kernel
+            far = half.freq >= 4 * case.fs / 4096
+            np.testing.assert_allclose(got[far], want[far], rtol=0.1)
+            assert got[0] < 0.5 * want[0]
             # the line's power sits at the record's own bin of 1234.5 Hz
             assert abs(half.freq[np.argmax(lp)] - 1234.5) <= b.fs / 2 / fe.shape[1]
     assert kinds == {"cut", "time", "spectrum"}

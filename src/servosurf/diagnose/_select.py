@@ -775,10 +775,14 @@ class Engine:
                 tried.append(c)
             best = None
             refused = []
+            nuisance = []
             for c in tried:
                 res = self._evaluate(c, p, terms, d_cur, progress)
                 if res[0] == -math.inf:
                     refused.append(c)
+                elif (c.effect.recalibration
+                      and not c.effect.must_beat_physics(c.config)):
+                    nuisance.append(res)
                 if best is None or res[0] > best[0]:
                     best = res
             # a configuration refused by the channel logic (e.g. a sideband of a
@@ -797,6 +801,7 @@ class Engine:
                         best = res
                     if res[0] > -math.inf:
                         break
+            best = self._prefer_nuisance(best, nuisance, progress)
             if best is None or best[0] <= 0:
                 break
             score, p, tnew, lam = best
@@ -814,6 +819,29 @@ class Engine:
         p, terms = self.prune(p, terms)
         p, terms = self.enforce_plausibility(p, terms, progress)
         return p, terms, ranking or []
+
+    def _prefer_nuisance(self, best, nuisance: list, progress=None):
+        """The round's winner, unless it is physics that a nuisance term (noise
+        levels off by a factor, :meth:`Effect.must_beat_physics` False) explains
+        as well: physics must beat the nuisance's deviance reduction by the
+        chi2(q) quantile at ``FAMILY_ALPHA`` (q: the physics term's parameters),
+        or the nuisance is taken. Excess white noise in idle records is a sensor
+        noise level, an ADC step or another sensor alike; only the first is no
+        mechanism (issue 19 item 5)."""
+        if best is None or best[0] <= 0 or not nuisance:
+            return best
+        eff = best[2].effect
+        if eff.recalibration:
+            return best
+        q = eff.n_params(best[2].config)
+        margin = float(sp.stats.chi2.isf(FAMILY_ALPHA, max(q, 1)))
+        alt = max((r for r in nuisance if r[0] > 0), key=lambda r: r[3], default=None)
+        if alt is None or alt[3] < best[3] - margin:
+            return best
+        if progress:
+            progress(f"{eff.name}: no better than the noise levels (dD {best[3]:.1f} "
+                     f"vs {alt[3]:.1f}, margin {margin:.1f}); noise levels taken")
+        return alt
 
     @staticmethod
     def _without(terms: list[Term], j: int) -> list[Term]:

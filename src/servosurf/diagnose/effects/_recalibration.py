@@ -34,6 +34,9 @@ _KF = _rel(0.7, 1.3, "force_constant", "nominal")
 _BW = _rel(1 / 3, 3.0, "sensor_bandwidth", "nominal")
 #: Bounds of the noise-level factors (power), dimensionless.
 NOISE_SCALE = (0.25, 4.0)
+#: Deviance change (chi2 units) below which a factor-2 change of a noise level is
+#: unseen by the recordings: that factor is not fitted.
+UNSEEN_DEVIANCE = 1.0
 #: Plant parameters (the loop perturbation) and noise-level factors.
 _PLANT = ("moving_mass", "flexure_stiffness", "flexure_damping", "force_constant",
           "sensor_bandwidth")
@@ -179,6 +182,27 @@ class RecalibrationEffect(Effect):
         if cfg is None or cfg.label not in _CONFIGS:
             return _FIELDS
         return _CONFIGS[cfg.label]
+
+    def refine(self, engine, model, term):
+        """Noise levels: a factor the recordings cannot see (its doubling moves
+        the deviance by less than :data:`UNSEEN_DEVIANCE`, e.g. the base
+        vibration under the sensor noise of idle records) is left at the machine
+        file's value, not fitted: its linearised start is noise and a fit along a
+        flat direction ends at a bound of its range, which is no evidence."""
+        if term.config is None or term.config.label != "noise-level":
+            return model
+        q = self.term(model, term.slot)
+        d0 = engine.deviance(model)
+        for a in _NOISE:
+            v = getattr(q, a)
+            if v is None:
+                continue
+            probe = dataclasses.replace(q, **{a: float(np.clip(
+                2.0 * v if v <= 1.0 else 0.5 * v, *NOISE_SCALE))})
+            d1 = engine.deviance(model.replace_term(NAME, term.slot, probe))
+            if abs(d1 - d0) < UNSEEN_DEVIANCE:
+                q = dataclasses.replace(q, **{a: None})
+        return model.replace_term(NAME, term.slot, q)
 
     def must_beat_physics(self, cfg=None):
         """The plant recalibration pays the extra penalty; the noise levels
