@@ -397,15 +397,25 @@ def test_records_at_another_rate_are_compared_at_their_own_samples(blind):
             assert half.freq.max() < 0.8 * b.fs / 4
             assert half.freq.min() >= case.fs / 4096 * (1 - 1e-9)
             lp = line_power(case, p, half.freq, fe.shape[1], fs=b.fs / 2)
-            want = case.noise_psd(p, half.freq, "fe") + lp
-            got = half.expected(p)
-            # the low-band projection takes most of the power of the bin at its
-            # edge (its exact expectation: test_nuisance); above a few bins the
-            # projected periodogram's expectation is the PSD seen through the
-            # Fejer kernel
-            far = half.freq >= 4 * case.fs / 4096
-            np.testing.assert_allclose(got[far], want[far], rtol=0.1)
-            assert got[0] < 0.5 * want[0]
+            got = half.expected(p) - lp
+            # the records are projected at their own rate too: the expectation
+            # is 2 / (fs n) a_k^H P R P a_k with R the Toeplitz covariance of the
+            # model's autocovariance at fs / 2 and P the projection (dense
+            # matrices here; the block uses FFT identities)
+            from scipy.linalg import toeplitz
+
+            from servosurf.diagnose._blocks import sampled_autocov
+
+            n, fs2 = fe.shape[1], b.fs / 2
+            proj = np.eye(n) - half.basis @ half.basis.T
+            m = proj @ toeplitz(sampled_autocov(case, p, n, fs2)) @ proj
+            k = np.rint(half.freq * n / fs2).astype(int)
+            ak = np.exp(2j * np.pi * np.outer(k, np.arange(n)) / n)
+            akm = np.fft.fft(m, axis=0)[k]  # conj(a_k)^T m
+            dense = np.real(np.sum(akm * ak, axis=1)) * 2 / (fs2 * n)
+            np.testing.assert_allclose(got, dense, rtol=1e-8)
+            # the projection takes most of the power of the bin at its edge
+            assert got[0] < 0.5 * case.noise_psd(p, half.freq[:1], "fe")[0]
             # the line's power sits at the record's own bin of 1234.5 Hz
             assert abs(half.freq[np.argmax(lp)] - 1234.5) <= b.fs / 2 / fe.shape[1]
     assert kinds == {"cut", "time", "spectrum"}

@@ -192,6 +192,8 @@ class Term:
     score: float = 0.0
     #: held-out test of the term when it was accepted (JSON-ready)
     held_out: dict | None = None
+    #: the candidate was refused by the held-out test (no retry of its module)
+    held_out_failed: bool = False
 
 
 @dataclass
@@ -637,6 +639,7 @@ class Engine:
         (None: they do not); the held-out test is kept in ``term.held_out``."""
         h = self.held_out(eff, q, term, terms)
         term.held_out = h
+        term.held_out_failed = not h["passed"]
         if not h["passed"]:
             return (f"no held-out improvement: deviance drop {h['delta_deviance']:.1f}"
                     f" on {h['n_held_out']} held-out values, {h['threshold']:.1f} "
@@ -778,7 +781,7 @@ class Engine:
             nuisance = []
             for c in tried:
                 res = self._evaluate(c, p, terms, d_cur, progress)
-                if res[0] == -math.inf:
+                if res[0] == -math.inf and not res[2].held_out_failed:
                     refused.append(c)
                 elif (c.effect.recalibration
                       and not c.effect.must_beat_physics(c.config)):
@@ -787,11 +790,16 @@ class Engine:
                     best = res
             # a configuration refused by the channel logic (e.g. a sideband of a
             # base line, absent at idle) does not stand for its module: try the
-            # module's next configurations in rank order
+            # module's next configurations in rank order (not after a held-out
+            # failure: the improvement itself did not reproduce; nor a
+            # configuration equal to one tried)
             for r in refused:
                 extra = [
                     c for c in cands
-                    if c.effect is r.effect and all(c is not t for t in tried)
+                    if c.effect is r.effect
+                    and all(c is not t and not (c.effect is t.effect
+                                                and c.config == t.config)
+                            for t in tried)
                     and c.score > MIN_LINEAR_SCORE
                 ][:CHANNEL_RETRIES]
                 for c in extra:
