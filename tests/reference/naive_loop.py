@@ -61,6 +61,8 @@ def closed_loop(loop, *, reference, force=None, current_noise=None,
     gi = mach.actuator.current_gain
     s_gain = mach.sensor.sensitivity
     dt = 1.0 / mach.controller.sample_rate
+    ramp = _force_ramp(lp, dt)
+    tool_row = cx[0]
     xa = np.zeros(ad.shape[0])
     xc = np.zeros(ac.shape[0])
     history = [0.0] * (nd + 2)  # history[j] = u[k - j]
@@ -92,10 +94,8 @@ def closed_loop(loop, *, reference, force=None, current_noise=None,
         # the DAC updates frac of a sample late: the older command is held over
         # the sample's first part, the newer over the rest (two columns of bd)
         newer, older = history[nd], history[nd + 1]
-        tool_force = f_ext[k]
-        if chip is not None:
-            tool_force += chip.thrust_pressure * _chip_area(
-                chip.tool_radius, chip.top - x1 - z_off[k])
+        if k == 0:
+            tool_force = f_ext[0] + _chip_force(chip, x1, z_off[0])
         carrier_force = 0.0  # N on m2 besides the motor's
         current_error = 0.0  # A: the force constant's position dependence
         if nl is not None:
@@ -109,9 +109,42 @@ def closed_loop(loop, *, reference, force=None, current_noise=None,
             hyst += dt * (rate - nl.bouc_wen_beta * abs(rate) * hyst
                           - nl.bouc_wen_gamma * rate * abs(hyst))
         i_total = i_n[k] + current_error + carrier_force / bl
-        xa = ad @ xa + bd @ np.array([newer, i_total, tool_force, older])
+        held_part = ad @ xa + bd[:, :4] @ np.array([newer, i_total, tool_force, older])
+        # the force on the tool ramps linearly to its value at the next sample,
+        # which depends on where the ramp puts the tool: solved by iteration
+        j = min(k + 1, n - 1)
+        nxt = f_ext[j]
+        for _ in range(30):
+            x1_next = tool_row @ (held_part + ramp * (nxt - tool_force))
+            nxt = f_ext[j] + _chip_force(chip, x1_next, z_off[j])
         for key, v in (("tool", x1), ("sensor", reading),
                        ("following_error", reference[k] - reading), ("u", u),
                        ("force", tool_force), ("current", cur)):
             out[key][k] = v
+        xa = held_part + ramp * (nxt - tool_force)
+        tool_force = nxt
     return out
+
+
+def _chip_force(chip, x1: float, offset: float) -> float:
+    """Chip thrust (N) at tool height ``x1`` (m) and chip offset (m)."""
+    if chip is None:
+        return 0.0
+    return chip.thrust_pressure * _chip_area(chip.tool_radius, chip.top - x1 - offset)
+
+
+def _force_ramp(loop, dt: float) -> np.ndarray:
+    """State after one sample of a tool force ramping from 0 to 1 N (first-order
+    hold), ``int_0^dt exp(A (dt - s)) B_F s / dt ds``, by 64-point Gauss-Legendre
+    quadrature of the matrix exponential (not the augmented-matrix formula the
+    loop uses)."""
+    import scipy.linalg
+
+    a, b, _c = loop.analogue_ss()
+    b_force = b[:, 2]
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    s = 0.5 * dt * (nodes + 1.0)
+    acc = np.zeros(a.shape[0])
+    for si, wi in zip(s, weights, strict=True):
+        acc += wi * (scipy.linalg.expm(a * (dt - si)) @ b_force) * si / dt
+    return 0.5 * dt * acc

@@ -174,11 +174,13 @@ def test_time_domain_loop_matches_frf(loop, name):
     for inp in INPUTS:
         for i, f0 in enumerate(freqs):
             h = _sine_response(loop, pert, inp, f0)
-            # force and current are held over each sample in the time domain (a
-            # staircase, whose fundamental carries the ZOH factor); the reference
-            # and the sensor noise are sampled at the instant
-            is_held = inp in ("force", "current_noise")
-            held = zoh[i] if is_held else 1.0
+            # the current is held over each sample in the time domain (a
+            # staircase, whose fundamental carries the ZOH factor); the force on
+            # the tool ramps linearly between its samples (first-order hold: a
+            # centred triangle, factor sinc^2, no phase); the reference and the
+            # sensor noise are sampled at the instant
+            held = {"current_noise": zoh[i],
+                    "force": np.sinc(f0 / loop.fs) ** 2}.get(inp, 1.0)
             # a staircase (the held input, or the DAC's command inside the loop)
             # also carries images at f -+ fs, which the mechanics (1/f^2 above
             # its modes) pass and the output sampling folds back: at most

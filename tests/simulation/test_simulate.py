@@ -70,8 +70,9 @@ def test_force_deviation_scales_with_thrust_pressure(small_lens):
 def test_force_deviation_is_the_loop_response_to_the_force(small_lens):
     """The force part equals the force -> tool FRF applied to the force record.
 
-    Oracle: the frequency-domain loop model (sampled-data FRF, force held over
-    each sample) filtering ``result.force`` by FFT, independent of how
+    Oracle: the frequency-domain loop model (sampled-data FRF; the force ramps
+    linearly between its samples, a first-order hold: factor sinc^2, no phase)
+    filtering ``result.force`` by FFT, independent of how
     :func:`simulate` subtracts two time-domain runs. The record starts at rest, so
     only its steady second half is compared against the periodic filter.
     """
@@ -82,8 +83,7 @@ def test_force_deviation_is_the_loop_response_to_the_force(small_lens):
     n = force.size
     f = np.fft.rfftfreq(n, 1.0 / loop.fs)
     h = np.zeros(f.size, dtype=complex)
-    s = 2j * np.pi * f[1:] / loop.fs
-    h[1:] = loop.frf(f[1:]).paths[("force", "tool")] * (1 - np.exp(-s)) / s
+    h[1:] = loop.frf(f[1:]).paths[("force", "tool")] * np.sinc(f[1:] / loop.fs) ** 2
     h[0] = loop.frf(np.array([1e-3])).paths[("force", "tool")][0].real
     pred = np.fft.irfft(np.fft.rfft(force) * h, n)
     dev = res.deviation["force"]

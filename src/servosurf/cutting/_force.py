@@ -43,7 +43,7 @@ class Material:
 
     name: str = param("Electroless plated NiP alloy", doc="material name")
     specific_thrust_pressure: float = param(
-        1265626817.9154398,
+        1265756479.329656,
         unit="Pa",
         low=0.0,
         plausible=(1e7, 1e11),

@@ -506,7 +506,9 @@ class TimeBlock(Block):
             n = rec["fe"].size
             f = np.fft.rfftfreq(n, 1.0 / fs)
             keep = _band_mask(f, fs, ctx.case)
-            q = record_basis(ctx.case, n, fs)  # low-band nuisance, projected out
+            # low-band nuisance (and an acquisition filter's settling at another
+            # rate), projected out of data and model
+            q = record_basis(ctx.case, n, fs, settle=True)
             w = _projected_whiten_weights(ctx, p_noise, f[keep], n, fs, q)
             self.meta.append((keep, w, f[keep]))
             self.bases.append(q)
@@ -556,8 +558,6 @@ class TimeBlock(Block):
         keep, w, _ = self.meta[i]
         q = self.bases[i]
         x = np.fft.rfft(project_low_band(self.residual_time(p, i), q))[keep] * w
-        lines = self.ctx.case.base_lines(p)
-        x = np.fft.rfft(self.residual_time(p, i))[keep] * w
         lines = self.ctx.case.base_lines(p) + self.ctx.case.sensor_lines(p)
         if lines:
             n = self.records[i]["fe"].size
@@ -759,6 +759,14 @@ def tool_autocov(ctx: Context, p: Model, lags: np.ndarray) -> np.ndarray:
 SEGMENT_GAP = 0.02
 
 
+def _curved(tx: np.ndarray, ty: np.ndarray) -> bool:
+    """Whether a profile's direction turns by more than 1 mrad along it."""
+    if tx.size < 2:
+        return False
+    ang = np.unwrap(np.arctan2(ty, tx))
+    return bool(np.ptp(ang) > 1e-3)
+
+
 class PointsBlock(Block):
     """A surface map or profile: heights at points versus the pointwise model.
 
@@ -896,6 +904,18 @@ class PointsBlock(Block):
         inner = inner[m:-m, m:-m] if m else inner
         return ~inner.ravel()[flat]
 
+    def _tangent(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit direction of a profile at each point (along increasing index; a
+        map: the x direction)."""
+        if self.kind != "profile" or x.size < 2:
+            return np.ones_like(x), np.zeros_like(x)
+        gx, gy = np.gradient(x), np.gradient(y)
+        nrm = np.hypot(gx, gy)
+        ok = nrm > 0
+        tx = np.where(ok, gx / np.where(ok, nrm, 1.0), 1.0)
+        ty = np.where(ok, gy / np.where(ok, nrm, 1.0), 0.0)
+        return tx, ty
+
     def _nuisance(self, p0: Model) -> np.ndarray:
         x, y = self.pts.x, self.pts.y
         cols = [np.ones_like(x)]
@@ -922,6 +942,18 @@ class PointsBlock(Block):
                 self.ctx.case, PointSet(self.ctx.case, x - dx, y - dy), p0, traj
             )
             cols.append((hp - hm) / (2 * d) * 1e-6)
+        tx, ty = self._tangent(x, y)
+        if self.kind == "profile" and _curved(tx, ty):
+            # a curved (ring) profile's start-angle registration: a shift along
+            # the profile at every point (a rotation about the spindle axis),
+            # which translations of the whole circle cannot represent
+            hp = surface_heights(
+                self.ctx.case, PointSet(self.ctx.case, x + d * tx, y + d * ty), p0,
+                traj)
+            hm = surface_heights(
+                self.ctx.case, PointSet(self.ctx.case, x - d * tx, y - d * ty), p0,
+                traj)
+            cols.append((hp - hm) / (2 * d) * 1e-6)
         # the instrument's smoothing (optical PSF, pixel integration, resampling):
         # to first order any symmetric kernel of variance s^2 adds (s^2 / 2) times
         # the Laplacian of the heights, profiled out like piston and tilt
@@ -929,15 +961,8 @@ class PointsBlock(Block):
         dl = self._pitch
         lap = -2.0 * h0 if self.kind == "profile" else -4.0 * h0
         offsets = ((dl, 0.0), (-dl, 0.0), (0.0, dl), (0.0, -dl))
-        if self.kind == "profile":
-            s = self.along[self.keep] if self.along is not None else None
-            ux, uy = (1.0, 0.0)
-            if s is not None and x.size > 1:
-                dxy = np.array([x[-1] - x[0], y[-1] - y[0]])
-                nrm = float(np.hypot(*dxy))
-                if nrm > 0:
-                    ux, uy = dxy / nrm
-            offsets = ((dl * ux, dl * uy), (-dl * ux, -dl * uy))
+        if self.kind == "profile":  # along the profile at each point
+            offsets = ((dl * tx, dl * ty), (-dl * tx, -dl * ty))
         for ddx, ddy in offsets:
             lap = lap + surface_heights(
                 self.ctx.case, PointSet(self.ctx.case, x + ddx, y + ddy), p0, traj)
@@ -1464,10 +1489,43 @@ def sampled_autocov(
     return (fs * np.fft.irfft(0.5 * sg, m))[:n]
 
 
-def record_basis(case: CaseModel, n: int, fs: float) -> np.ndarray:
+#: Time (s) at the start of a command or cut record sampled at another rate than
+#: the controller's that is not compared: the record comes through an acquisition
+#: anti-alias filter, which rings on the loop's start-up step (the loop starts
+#: from rest with the command's first value, a step of micrometres) for about its
+#: length; the diagnosis's model has no such filter. A 255-tap FIR at 199.6 kHz
+#: rings for 0.64 ms, an 8-pole analogue filter at 40 kHz for tens of us.
+RESAMPLED_SETTLE = 1e-3
+
+
+def record_basis(case: CaseModel, n: int, fs: float, *, settle: bool = False
+                 ) -> np.ndarray:
     """:func:`low_band_basis` of an ``n``-sample record at ``fs`` for ``case``
-    (half-bandwidth: the compared band's lower edge)."""
-    return low_band_basis(n, fs, analysis_band(fs, case)[0])
+    (half-bandwidth: the compared band's lower edge).
+
+    With ``settle`` and a record at another rate than the controller's, the first
+    :data:`RESAMPLED_SETTLE` seconds are nuisance too (one unit column per
+    sample): data and model are compared after the acquisition filter settled."""
+    m = 0
+    if settle and not same_rate(fs, case):
+        m = min(int(math.ceil(RESAMPLED_SETTLE * fs)), n // 4)
+    w = analysis_band(fs, case)[0]
+    if m == 0:
+        return low_band_basis(n, fs, w)
+    return _settled_basis(int(n), float(fs), float(w), m)
+
+
+@_functools.lru_cache(maxsize=32)
+def _settled_basis(n: int, fs: float, w: float, m: int) -> np.ndarray:
+    """Orthonormal basis of :func:`low_band_basis` and the first ``m`` unit
+    vectors (memoised, read-only)."""
+    head = np.zeros((n, m))
+    head[np.arange(m), np.arange(m)] = 1.0
+    q, r = np.linalg.qr(np.column_stack([head, low_band_basis(n, fs, w)]))
+    keep = np.abs(np.diag(r)) > 1e-9
+    q = np.ascontiguousarray(q[:, keep])
+    q.setflags(write=False)
+    return q
 
 
 def expected_projected_periodogram(

@@ -71,9 +71,10 @@ def _closed_loop_sim(
     ----------
     ad, bd : ndarray
         ZOH-discretised analogue part (amplifier, mechanics, sensor filter and any
-        extra modes), shapes (na, na) and (na, 4); inputs ``[u[k - nd] (V), i (A),
-        F (N on m1), u[k - nd - 1] (V)]``: the two command columns split the
-        sample at the DAC's update time (exact fractional delay).
+        extra modes), shapes (na, na) and (na, 5); inputs ``[u[k - nd] (V), i (A),
+        F (N on m1), u[k - nd - 1] (V), F[k + 1] - F[k] (N)]``: the two command
+        columns split the sample at the DAC's update time (exact fractional
+        delay); the last is the force's ramp over the sample (first-order hold).
     cx : ndarray of shape (7, na)
         Output rows, see :data:`CX_ROWS`.
     ac, bc, cc, dc : ndarray, ndarray, ndarray, float
@@ -107,10 +108,16 @@ def _closed_loop_sim(
     Notes
     -----
     Seed paper Fig. 5 loop; the chip force follows section 3.2.2 with the force
-    computed from the actual (deviated) tool position. Nonlinear forces are
-    evaluated from the state at the start of each sample and held over it (ZOH),
-    like the command. With every nonlinearity off the arithmetic is exactly the
-    linear loop's.
+    computed from the actual (deviated) tool position. The force on the tool
+    varies linearly between the samples (first-order hold): ``F[k + 1]`` depends
+    on the tool position at ``k + 1``, which depends on ``F[k + 1]`` through the
+    ramp column, so it is found by fixed-point iteration from ``F[k]`` (the
+    contraction factor is ``Cx[0] Bd[:, 4]`` times the chip stiffness, about
+    4e-6: three iterations reach rounding). The external force ``f`` is
+    interpolated the same way (``f[n - 1]`` held over the last sample).
+    Nonlinear forces on the carrier are evaluated from the state at the start of
+    each sample and held over it (ZOH), like the command. With every
+    nonlinearity off the arithmetic is exactly the linear loop's.
     """
     n = r.shape[0]
     na = ad.shape[0]
@@ -133,6 +140,11 @@ def _closed_loop_sim(
     adc = nl[15] > 0.0
     state = kf or flex or fric or qdamp or bw
     zbw = 0.0
+    # tool displacement per unit force ramp over one sample (m/N)
+    q_ramp = 0.0
+    for j in range(na):
+        q_ramp += cx[0, j] * bd[j, 4]
+    force = 0.0
     for k in range(n):
         x1 = 0.0
         ym = 0.0
@@ -192,11 +204,12 @@ def _closed_loop_sim(
         reg[0] = u_dac
         u_new = reg[nd]
         u_old = reg[nd + 1]
-        force = f[k]
-        if chip_kind == 1:
-            force += chip_par[0] * _segment_area(
-                chip_par[1], chip_par[2] - x1 - z_off[k]
-            )
+        if k == 0:
+            force = f[0]
+            if chip_kind == 1:
+                force += chip_par[0] * _segment_area(
+                    chip_par[1], chip_par[2] - x1 - z_off[0]
+                )
         i_eq = i_n[k]
         if state:
             extra = 0.0
@@ -220,11 +233,27 @@ def _closed_loop_sim(
             for j in range(na):
                 acc += ad[i, j] * xa[j]
             xa_new[i] = acc
+        # the force at the next sample (first-order hold over this one)
+        kn = k + 1 if k + 1 < n else k
+        f_next = f[kn]
+        if chip_kind == 1:
+            x1p = 0.0
+            for j in range(na):
+                x1p += cx[0, j] * xa_new[j]
+            fn = force
+            for _it in range(3):
+                fn = f_next + chip_par[0] * _segment_area(
+                    chip_par[1],
+                    chip_par[2] - (x1p + q_ramp * (fn - force)) - z_off[kn],
+                )
+            f_next = fn
+        dfo = f_next - force
         for i in range(na):
-            xa[i] = xa_new[i]
+            xa[i] = xa_new[i] + bd[i, 4] * dfo
         out[0, k] = x1
         out[1, k] = ym
         out[2, k] = r[k] - ym
         out[3, k] = u
         out[4, k] = force
         out[5, k] = cur
+        force = f_next
