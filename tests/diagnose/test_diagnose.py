@@ -515,30 +515,57 @@ def test_pointwise_surface_matches_the_sweep_kernel():
 
 
 def test_force_excess_test_is_calibrated_with_an_estimated_sigma():
-    """White force noise, sigma from the MAD of differences as ForceBlock does: the
-    power-excess test's false-alarm rate matches its nominal level (the chi2(n)
-    test that treats sigma as known fires about 6x too often at 1 %)."""
+    """White force noise, sigma from the periodogram median of the top of the band
+    as ForceBlock does: the power-excess test's false-alarm rate matches its
+    nominal level (the chi2(n) test that treats sigma as known fires several times
+    too often at 1 %)."""
     import math
 
+    from servosurf.diagnose._blocks import white_level
     from servosurf.diagnose._locate import _chi2_logsf, force_excess_logsf
 
+    def compared(x, fs, hi):
+        sig, var_log, keep = white_level(x, fs, hi)
+        xf = np.fft.rfft(x)[keep] / math.sqrt(0.5 * x.size * sig**2)
+        return np.concatenate([xf.real, xf.imag]), var_log
+
     rng = np.random.default_rng(11)
+    fs = 199.6e3
     n, trials = 8192, 1500
     lp_new, lp_naive = [], []
     for _ in range(trials):
         x = rng.standard_normal(n) * 2e-3  # N
-        d = np.diff(x)
-        sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
-        r = x / sig
-        lp_new.append(force_excess_logsf(r))
-        lp_naive.append(_chi2_logsf(float(r @ r), n))
+        r, var_log = compared(x, fs, fs / 2)
+        lp_new.append(force_excess_logsf(r, var_log))
+        lp_naive.append(_chi2_logsf(float(r @ r), r.size))
     fa_new = np.mean(np.array(lp_new) < -2)  # nominal 1 %
     fa_naive = np.mean(np.array(lp_naive) < -2)
     assert 0.003 <= fa_new <= 0.022, fa_new
     assert fa_naive > 0.03, fa_naive
     # a real excess (8 % of the variance) is still found
     x = rng.standard_normal(32768)
-    d = np.diff(x)
-    sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
     slow = 0.4 * np.sin(np.linspace(0, 20 * np.pi, x.size))  # smooth misfit
-    assert force_excess_logsf((x + slow) / sig) < -4
+    r, var_log = compared(x + slow, fs, fs / 2)
+    assert force_excess_logsf(r, var_log) < -4
+
+
+def test_force_level_of_an_anti_aliased_record_is_its_passband_level():
+    """Force noise logged at half the controller rate through scipy's FIR
+    decimator: the level from the band top (0.8 Nyquist) is the white level, while
+    the MAD of first differences reads the filter's roll-off as less noise."""
+    import math
+
+    from scipy.signal import resample_poly
+
+    from servosurf.diagnose._blocks import RESAMPLED_BAND, white_level
+
+    rng = np.random.default_rng(5)
+    x = resample_poly(rng.standard_normal(2 * 32768) * 1e-3, 1, 2,
+                      window=("kaiser", 10.0))  # N, white to 0.9 of Nyquist
+    fs = 99.8e3
+    sig, _var, _keep = white_level(x, fs, RESAMPLED_BAND * fs / 2)
+    want = 1e-3 / math.sqrt(2.0)  # the decimator halves the noise power
+    assert abs(sig / want - 1) < 0.03, sig / want
+    d = np.diff(x)
+    mad = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
+    assert mad / want < 0.97  # what the previous estimate read

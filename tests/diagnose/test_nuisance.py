@@ -170,6 +170,9 @@ def test_noise_level_recalibration_scales_the_psds():
     np.testing.assert_allclose(evaluate_psd(d1.current_noise, f),
                                evaluate_psd(d0.current_noise, f), rtol=0)
     assert q.noise_only()
+    d2 = E.RecalibrationParams(current_noise_scale=1.7).machine(m).disturbances
+    np.testing.assert_allclose(evaluate_psd(d2.current_noise, f),
+                               1.7 * evaluate_psd(d0.current_noise, f), rtol=1e-12)
     assert not E.RecalibrationParams(moving_mass=0.18).noise_only()
 
 
@@ -181,14 +184,16 @@ def test_noise_level_config_fits_only_the_factors():
     eff = get_effect("recalibration")
     assert {c.label for c in eff.configs(None, Model())} == {"plant", "noise-level"}
     cfg = Config("noise-level")
-    assert eff.n_params(cfg) == 2
-    p = eff.start(Model(), cfg, [10.0, 5.0], None)  # 1 + 0.1 c
+    assert eff.n_params(cfg) == 3
+    p = eff.start(Model(), cfg, [10.0, 5.0, -5.0], None)  # 1 + 0.1 c
     (q,) = p.get("recalibration")
     assert q.noise_only()
     assert q.base_noise_scale == pytest.approx(2.0)
     assert q.sensor_noise_scale == pytest.approx(1.5)
+    assert q.current_noise_scale == pytest.approx(0.5)
     free = eff.free(p, 0, None)
-    assert {x.field for x in free} == {"base_noise_scale", "sensor_noise_scale"}
+    assert {x.field for x in free} == {"base_noise_scale", "sensor_noise_scale",
+                                       "current_noise_scale"}
     assert all((x.lo, x.hi) == (0.25, 4.0) for x in free)
 
 

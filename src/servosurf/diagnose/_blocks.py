@@ -478,6 +478,20 @@ def _remove_lines(
     return r
 
 
+#: Bounds of a record's profiled noise level per source (power), dimensionless:
+#: the recalibration's noise-level range.
+NOISE_LEVEL_BOUNDS = (0.25, 4.0)
+#: Periodogram cap (in units of its expectation) when profiling noise levels: an
+#: exponential variable exceeds 12 with probability 6e-6.
+NOISE_LEVEL_CAP = 12.0
+#: Smallest share of a bin's noise power a source must reach somewhere in the
+#: compared band for its level to be profiled.
+NOISE_LEVEL_MIN_SHARE = 0.3
+#: Likelihood-ratio statistic (chi2, 1 dof) a record's noise level must reach to
+#: be taken off the model's: 3 sigma.
+NOISE_LEVEL_LR = 9.0
+
+
 class TimeBlock(Block):
     """Following-error records with a command and/or an external force.
 
@@ -514,6 +528,68 @@ class TimeBlock(Block):
             self.bases.append(q)
             tot += 2 * int(keep.sum()) - _in_band_dof(q, keep)
         super().__init__(recording=name, kind="following-error", domain="time", n=tot)
+        self.noise_factors = self._profile_noise_levels(p_noise)
+
+    def _profile_noise_levels(self, p_noise: Model) -> dict[str, float]:
+        """Noise level of each source in these records, relative to the model's.
+
+        The disturbance PSDs are calibrations of one machine on one day (a gain
+        setting, a cable, the floor moves them): a record's noise power per source
+        is a nuisance within :data:`NOISE_LEVEL_BOUNDS` (power), fitted by the
+        Whittle likelihood of its compared bins at the nominal deterministic
+        model, each bin's periodogram capped at :data:`NOISE_LEVEL_CAP` times its
+        expectation (lines and other deterministic misfits are narrow: they do not
+        set a level). Sources with less than :data:`NOISE_LEVEL_MIN_SHARE` of
+        any bin's power are left at the model's level. The whitening weights are
+        scaled by the fitted level (``1 / sqrt(g)``) and the factors reported.
+        """
+        case = self.ctx.case
+        us, shares = [], []
+        for i, rec in enumerate(self.records):
+            keep, w, fk = self.meta[i]
+            q = self.bases[i]
+            x = np.fft.rfft(project_low_band(self.residual_time(p_noise, i), q))[keep]
+            u = 0.5 * np.abs(x * w) ** 2  # Exp(1) per bin under the model
+            if not np.all(np.isfinite(u)):
+                return {}
+            parts = case.noise_psd_sources(p_noise, fk, "fe")
+            tot = sum(parts.values())
+            tot = np.where(tot > 0, tot, 1.0)
+            us.append(np.minimum(u, NOISE_LEVEL_CAP))
+            shares.append({k: v / tot for k, v in parts.items()})
+        u = np.concatenate(us)
+        names = [k for k in shares[0]
+                 if max(float(np.max(s[k])) for s in shares) >= NOISE_LEVEL_MIN_SHARE]
+        if u.size < 64 or not names:
+            return {}
+        sh = np.array([np.concatenate([s[k] for s in shares]) for k in names])
+        rest = 1.0 - sh.sum(axis=0)
+        lo, hi = (math.log(b) for b in NOISE_LEVEL_BOUNDS)
+
+        def nll(z):
+            g = np.exp(z) @ sh + rest
+            return float(np.sum(u / g + np.log(g)))
+
+        res = sp.optimize.minimize(nll, np.zeros(len(names)), method="L-BFGS-B",
+                                   bounds=[(lo, hi)] * len(names))
+        a = np.exp(res.x)
+        # a factor the records do not show at NOISE_LEVEL_LR (likelihood ratio,
+        # the others at their fit) stays at the model's level
+        out = {}
+        for j, k in enumerate(names):
+            z1 = res.x.copy()
+            z1[j] = 0.0
+            if 2.0 * (nll(z1) - res.fun) < NOISE_LEVEL_LR:
+                a[j] = 1.0
+            out[k] = float(a[j])
+        g = a @ sh + rest
+        off = 0
+        for i in range(len(self.meta)):
+            keep, w, fk = self.meta[i]
+            m = fk.size
+            self.meta[i] = (keep, w / np.sqrt(g[off:off + m]), fk)
+            off += m
+        return out
 
     groups = ("perturbation", "nonlinearity", "base_lines", "sensor_lines")
 
@@ -635,8 +711,57 @@ class CutBlock(TimeBlock):
         )
 
 
+#: Share of the compared band, from its top, whose periodogram median sets a force
+#: record's white noise level: far above the lenslet harmonics where a model error
+#: of the chip force lives, and inside the band an acquisition filter passes.
+FORCE_LEVEL_BAND = 0.75
+
+
+def white_level(x: np.ndarray, fs: float, hi: float) -> tuple[float, float, np.ndarray]:
+    """White noise level of a record from its periodogram median.
+
+    Parameters
+    ----------
+    x : ndarray of shape (n,)
+        Record (any unit), its model subtracted.
+    fs : float
+        Sampling rate in Hz.
+    hi : float
+        Top of the compared band in Hz (the Nyquist frequency at the controller
+        rate, :data:`RESAMPLED_BAND` of it otherwise).
+
+    Returns
+    -------
+    sigma : float
+        Standard deviation of the white noise per sample (x's unit): ``sqrt(median
+        |X_k|^2 / (n ln 2))`` over the bins in the top :data:`FORCE_LEVEL_BAND` of
+        ``(0, hi]`` (``|X_k|^2 / (n sigma^2)`` is exponential with median ln 2).
+    var_log : float
+        Variance of ``log sigma^2`` (the sample median of m exponential values:
+        ``1 / (m ln(2)^2)``).
+    keep : ndarray of bool
+        The compared bins ``0 < f <= hi`` (below the Nyquist bin).
+    """
+    n = x.size
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    keep = (f > 0) & (f <= hi * (1 + 1e-12)) & (f < 0.5 * fs * (1 - 1e-12))
+    xf = np.fft.rfft(x - np.mean(x))
+    est = keep & (f >= (1.0 - FORCE_LEVEL_BAND) * hi)
+    m = int(est.sum())
+    if m < 8:
+        d = np.diff(x)
+        sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
+        return float(sig), 2.0 / max(d.size, 1) / 0.77, keep
+    sig2 = float(np.median(np.abs(xf[est]) ** 2)) / (n * math.log(2.0))
+    return math.sqrt(max(sig2, 0.0)), 1.0 / (m * math.log(2.0) ** 2), keep
+
+
 class ForceBlock(Block):
-    """The force channel of a cut: measured minus the chip model, white noise."""
+    """The force channel of a cut: measured minus the chip model, white noise.
+
+    Compared in the frequency domain up to the band top of the record's rate
+    (:func:`analysis_band`: an acquisition filter shapes the noise above it), with
+    the white level of :func:`white_level` estimated at the nominal model."""
 
     def __init__(
         self, ctx: Context, cut: CutBlock, force: np.ndarray, p0: Model
@@ -645,18 +770,27 @@ class ForceBlock(Block):
         self.cut = cut
         self.force = np.asarray(force, dtype=float)
         res = self.force - cut.predict(p0)["force"]
-        d = np.diff(res)
-        sig = 1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)
+        hi = analysis_band(cut.fs, ctx.case)[1]
+        sig, self.var_log_sigma, self.keep = white_level(res, cut.fs, hi)
         floor = 1e-4 * max(float(np.max(np.abs(self.force))), 1e-6)
         self.sigma = max(float(sig), floor)
         super().__init__(
-            recording=cut.recording, kind="cut", domain="force", n=int(self.force.size)
+            recording=cut.recording, kind="cut", domain="force",
+            n=2 * int(self.keep.sum()),
         )
 
     groups = SIM_GROUPS
 
+    def transform(self, x: np.ndarray) -> np.ndarray:
+        """A force series (N) in the block's residual domain: real and imaginary
+        parts of its compared bins over ``sqrt(n sigma^2 / 2)`` (white noise of
+        the block's level gives N(0, 1) values)."""
+        xf = np.fft.rfft(np.asarray(x, dtype=float))[self.keep]
+        xf = xf / math.sqrt(0.5 * x.size * self.sigma**2)
+        return np.concatenate([xf.real, xf.imag])
+
     def residual(self, p: Model) -> np.ndarray:
-        return _finite((self.force - self.cut.predict(p)["force"]) / self.sigma)
+        return _finite(self.transform(self.force - self.cut.predict(p)["force"]))
 
 
 class FRFBlock(Block):
@@ -1503,29 +1637,79 @@ def record_basis(case: CaseModel, n: int, fs: float, *, settle: bool = False
     """:func:`low_band_basis` of an ``n``-sample record at ``fs`` for ``case``
     (half-bandwidth: the compared band's lower edge).
 
-    With ``settle`` and a record at another rate than the controller's, the first
-    :data:`RESAMPLED_SETTLE` seconds are nuisance too (one unit column per
-    sample): data and model are compared after the acquisition filter settled."""
-    m = 0
-    if settle and not same_rate(fs, case):
-        m = min(int(math.ceil(RESAMPLED_SETTLE * fs)), n // 4)
+    With ``settle`` (records with a command or a cut, which start from rest):
+
+    * the loop's free response from an unknown initial state is nuisance too
+      (:func:`free_response_basis`): "at rest" holds up to the noise, whose state
+      at the record's first sample (the integrator's charge, the suspension
+      mode's motion, content below the compared band) the record does not
+      know;
+    * at another rate than the controller's, the first :data:`RESAMPLED_SETTLE`
+      seconds are nuisance (one unit column per sample): data and model are
+      compared after the acquisition filter settled.
+    """
     w = analysis_band(fs, case)[0]
-    if m == 0:
+    if not settle:
         return low_band_basis(n, fs, w)
-    return _settled_basis(int(n), float(fs), float(w), m)
+    m = 0
+    if not same_rate(fs, case):
+        m = min(int(math.ceil(RESAMPLED_SETTLE * fs)), n // 4)
+    key = (int(n), float(fs), float(w), m)
+    cache = case.__dict__.setdefault("_record_bases", {})
+    if key not in cache:
+        head = np.zeros((n, m))
+        head[np.arange(m), np.arange(m)] = 1.0
+        cols = [head, free_response_basis(case, n, fs), low_band_basis(n, fs, w)]
+        q, r = np.linalg.qr(np.column_stack(cols))
+        keep = np.abs(np.diag(r)) > 1e-9
+        q = np.ascontiguousarray(q[:, keep])
+        q.setflags(write=False)
+        if len(cache) > 16:
+            cache.clear()
+        cache[key] = q
+    return cache[key]
 
 
-@_functools.lru_cache(maxsize=32)
-def _settled_basis(n: int, fs: float, w: float, m: int) -> np.ndarray:
-    """Orthonormal basis of :func:`low_band_basis` and the first ``m`` unit
-    vectors (memoised, read-only)."""
-    head = np.zeros((n, m))
-    head[np.arange(m), np.arange(m)] = 1.0
-    q, r = np.linalg.qr(np.column_stack([head, low_band_basis(n, fs, w)]))
-    keep = np.abs(np.diag(r)) > 1e-9
-    q = np.ascontiguousarray(q[:, keep])
-    q.setflags(write=False)
-    return q
+#: Singular value (relative to the largest, unit-norm columns) down to which the
+#: free responses of the loop's states span the initial-state nuisance.
+FREE_RESPONSE_RTOL = 1e-6
+
+
+def free_response_basis(case: CaseModel, n: int, fs: float) -> np.ndarray:
+    """Orthonormal basis of the loop's free responses seen in a record.
+
+    The measured position (hence the following error, up to sign) of the exact
+    discrete closed loop (:meth:`servosurf.servo.ServoLoop.closed_loop_matrix`,
+    the nominal loop) from each unit initial state, ``c A^k e_j``, at the
+    ``n`` samples of a record at ``fs`` (interpolated linearly from the
+    controller rate when ``fs`` is another rate); columns scaled to unit norm and
+    reduced by an SVD to the directions above :data:`FREE_RESPONSE_RTOL`.
+
+    Returns
+    -------
+    ndarray of shape (n, k)
+        Orthonormal columns (dimensionless).
+    """
+    a = case.loop.closed_loop_matrix()
+    na = case.loop.discrete_models()[0].shape[0]
+    cy = np.zeros(a.shape[0])
+    cy[:na] = case.loop.discrete_models()[2][1]
+    m = int(math.ceil(n * case.fs / fs)) + 2
+    y = np.empty((m, a.shape[0]))
+    v = cy.copy()
+    for k in range(m):
+        y[k] = v
+        v = v @ a
+    if not same_rate(fs, case):
+        tc = np.arange(m) / case.fs
+        tr = np.arange(n) / fs
+        y = np.column_stack([np.interp(tr, tc, y[:, j]) for j in range(y.shape[1])])
+    else:
+        y = y[:n]
+    nrm = np.linalg.norm(y, axis=0)
+    y = y[:, nrm > 0] / nrm[nrm > 0]
+    u, sv, _ = np.linalg.svd(y, full_matrices=False)
+    return u[:, sv > FREE_RESPONSE_RTOL * sv[0]]
 
 
 def expected_projected_periodogram(

@@ -118,6 +118,9 @@ class Diagnosis:
     tentative: list = field(default_factory=list)
     refused: list = field(default_factory=list)
     acceptance: dict = field(default_factory=dict)
+    #: per time recording, its profiled noise power per source relative to the
+    #: model's (factors off 1 only): a calibration, not physics
+    noise_levels: dict = field(default_factory=dict)
 
     @property
     def fit_before_percent(self) -> float:
@@ -149,6 +152,7 @@ class Diagnosis:
             "deviance": self.deviance,
             "refused": self.refused,
             "acceptance": self.acceptance,
+            "record_noise_levels": self.noise_levels,
         }
 
 
@@ -560,4 +564,17 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
         tentative=tentative,
         refused=refused,
         acceptance=eng.acceptance(terms),
+        noise_levels=_noise_levels(blocks1),
     )
+
+
+def _noise_levels(blocks) -> dict:
+    """Profiled noise-power factors of the time recordings that are off 1."""
+    out = {}
+    for b in blocks:
+        f = getattr(b, "noise_factors", None) or {}
+        off = {f"{k}_power_factor": round(v, 4) for k, v in f.items()
+               if abs(v - 1.0) > 0.01}
+        if off:
+            out[b.recording] = off
+    return out

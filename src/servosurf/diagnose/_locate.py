@@ -413,7 +413,7 @@ def variance_excess_logsf(
     return _chi2_logsf(ss / dof * k, k)
 
 
-def force_excess_logsf(r: np.ndarray) -> float:
+def force_excess_logsf(r: np.ndarray, var_log_sigma: float | None = None) -> float:
     """log10 p of the residual power excess of a force record (one-sided).
 
     Parameters
@@ -421,14 +421,20 @@ def force_excess_logsf(r: np.ndarray) -> float:
     r : ndarray of shape (n,)
         Force residual divided by the noise sigma estimated from the same record
         (:class:`ForceBlock`), dimensionless.
+    var_log_sigma : float, optional
+        Variance of the log of the estimated noise variance when it is the
+        periodogram median of a subset of the compared bins
+        (:func:`servosurf.diagnose._blocks.white_level`, ``ForceBlock``); without
+        it the sigma is the MAD of first differences of the n samples.
 
     Returns
     -------
     float
         log10 of the probability, under white noise of the estimated sigma, of a
         mean square at least this large. The sigma is estimated, not known, so the
-        statistic is log(mean square) ~ N(0, (2 / n) (1 + 1 / MAD_DIFF_EFFICIENCY)),
-        not chi2(n) / n.
+        statistic is log(mean square) ~ N(0, var_log_sigma - 2 / n) (median of
+        a subset of the bins) or N(0, (2 / n) (1 + 1 / MAD_DIFF_EFFICIENCY)) (MAD
+        of differences), not chi2(n) / n.
     """
     n = r.size
     if n < 2:
@@ -436,16 +442,22 @@ def force_excess_logsf(r: np.ndarray) -> float:
     ms = float(r @ r) / n
     if not ms > 0:
         return 0.0
-    sd = math.sqrt(2.0 / n * (1.0 + 1.0 / MAD_DIFF_EFFICIENCY))
+    if var_log_sigma is None:
+        sd = math.sqrt(2.0 / n + 2.0 / (n * MAD_DIFF_EFFICIENCY))
+    else:
+        # the level is the median of a subset of the same periodogram bins: the
+        # mean square and the median co-vary, cov(log mean, log median) = 1/N for
+        # N exponential bins (the median's influence sign(x - ln 2) against x - 1)
+        sd = math.sqrt(max(var_log_sigma - 2.0 / n, 0.25 * var_log_sigma))
     return float(sp.stats.norm.logsf(math.log(ms) / sd) / math.log(10.0))
 
 
 def _force(b: ForceBlock, p: Model) -> list[Mismatch]:
     r = b.residual(p)
     n = r.size
-    lp = force_excess_logsf(r)
+    lp = force_excess_logsf(r, b.var_log_sigma)
     if lp < math.log10(ALPHA):
-        F = b.cut.predict(p)["force"]
+        F = b.transform(b.cut.predict(p)["force"])
         c = float(np.dot(r, F) / max(np.linalg.norm(F) * np.linalg.norm(r), 1e-300))
         return [
             Mismatch(

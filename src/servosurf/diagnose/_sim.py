@@ -216,14 +216,28 @@ class CaseModel:
         Frequencies below ``fs / 4096`` carry no power (the project's convention,
         :func:`servosurf.noise.frequency_grid`). Lines are not included.
         """
+        parts = self.noise_psd_sources(p, freq, output, paths)
+        return sum(parts.values(), np.zeros(np.shape(freq)))
+
+    def noise_psd_sources(
+        self,
+        p: Model,
+        freq: np.ndarray,
+        output: str = "fe",
+        paths: dict | None = None,
+    ) -> dict[str, np.ndarray]:
+        """:meth:`noise_psd` split by source (``sensor_noise``, ``current_noise``,
+        ``base``): each source's one-sided PSD (m^2/Hz) at ``output``."""
         freq = np.asarray(freq, dtype=float)
         ps = self.paths(p, freq) if paths is None else paths
         w = self.disturbance_psds(p, freq)
-        tot = np.zeros(freq.shape)
+        low = freq < self.fs / 4096 * (1 - 1e-9)
+        out = {}
         for name, wk in w.items():
-            tot += wk * np.abs(ps[(name, output)]) ** 2
-        tot[freq < self.fs / 4096 * (1 - 1e-9)] = 0.0
-        return tot
+            part = wk * np.abs(ps[(name, output)]) ** 2
+            part[low] = 0.0
+            out[name] = part
+        return out
 
     # ------------------------------------------------------------ time domain
     def discrete(self, p: Model):

@@ -40,7 +40,7 @@ UNSEEN_DEVIANCE = 1.0
 #: Plant parameters (the loop perturbation) and noise-level factors.
 _PLANT = ("moving_mass", "flexure_stiffness", "flexure_damping", "force_constant",
           "sensor_bandwidth")
-_NOISE = ("base_noise_scale", "sensor_noise_scale")
+_NOISE = ("base_noise_scale", "sensor_noise_scale", "current_noise_scale")
 
 
 @dataclass(frozen=True)
@@ -92,9 +92,16 @@ class RecalibrationParams(EffectParams):
         source="0.25-4 x in power, as the base-vibration factor (the sensor's "
         "noise density is calibrated once; gain settings and cabling move it); "
         "beyond that, sensor-noise-shape (another sensor)")
+    current_noise_scale: float | None = quantity(
+        None, unit="1", doc="factor on the current-noise PSD of the machine file",
+        low=NOISE_SCALE[0], high=NOISE_SCALE[1],
+        source="0.25-4 x in power, as the base-vibration factor (the amplifier's "
+        "and the DAC's noise is measured once at the current monitor; supply, "
+        "grounding and the gain setting move it)")
 
     def machine(self, m):
-        """The machine with its base-vibration and sensor-noise PSDs scaled.
+        """The machine with its base-vibration, sensor- and current-noise PSDs
+        scaled.
 
         Parametric PSDs scale their level and floor by the factor's square root;
         a PSD read from a CSV file is left as it is (no scale field there).
@@ -102,7 +109,8 @@ class RecalibrationParams(EffectParams):
         d = m.disturbances
         kw = {}
         for field, name in (("base_noise_scale", "base_vibration"),
-                            ("sensor_noise_scale", "sensor_noise")):
+                            ("sensor_noise_scale", "sensor_noise"),
+                            ("current_noise_scale", "current_noise")):
             c = getattr(self, field)
             psd = getattr(d, name)
             if c is None or c == 1.0 or psd.csv:
@@ -133,7 +141,7 @@ class RecalibrationParams(EffectParams):
 
 #: Recalibrated fields and the relative step of their template columns.
 _FIELDS = _PLANT + _NOISE
-_STEPS = (1.01, 1.02, 1.1, 1.01, 1.02, 1.1, 1.1)
+_STEPS = (1.01, 1.02, 1.1, 1.01, 1.02, 1.1, 1.1, 1.1)
 _STEP = dict(zip(_FIELDS, _STEPS, strict=True))
 #: Configurations: the plant parameters, or the noise levels alone (a
 #: recalibration of the noise model only, issue 19 item 5).
