@@ -308,13 +308,12 @@ def surface_field(campaign: dict):
 
 
 def path_terms(p: Model, t, theta, z):
-    """Outside-the-loop tool terms (generator's own formulas)."""
-    sn = _one(p, "sensor-nonlinearity")
-    a2, a3 = (sn.a2, sn.a3) if sn is not None else (0.0, 0.0)
+    """Outside-the-loop tool terms (generator's own formulas; the sensor
+    nonlinearity acts inside the loop, through the loop kernel)."""
     dr = _one(p, "thermal-drift")
     amp, tau, rate = ((dr.amplitude, dr.time_constant, dr.rate) if dr is not None
                       else (0.0, 1.0, 0.0))
-    dz = -(a2 * z**2 + a3 * z**3)
+    dz = np.zeros(np.shape(z))
     if amp:
         dz = dz + amp * (1 - np.exp(-t / tau))
     dz = dz + rate * t

@@ -152,37 +152,3 @@ def test_record_noise_level_is_profiled_per_source(ctx, sensor_factor):
         assert abs(got["sensor_noise"] / sensor_factor - 1) < 0.08, got
     w = block.residual(Model())
     assert abs(np.mean(w**2) - 1) < 0.05
-
-
-def test_the_loop_state_at_a_record_start_is_a_nuisance(ctx, monkeypatch):
-    """A record cut out of a running loop: a 10 mN load, released at the
-    record's first sample, had charged the integrator (the model starts from
-    rest). Its free response is projected out, so the whitened residual is the
-    noise; the same record compared without the free-response nuisance is far
-    off."""
-    from servosurf.noise import evaluate_psd
-
-    import servosurf.diagnose._blocks as blocks
-
-    case = ctx.case
-    fs = case.fs
-    n, pre = 16384, 40000
-    d = case.machine.disturbances
-    rng = np.random.default_rng(4)  # seeded: any draw works
-    s_n = _colored(rng, lambda f: evaluate_psd(d.sensor_noise, f), n + pre, fs)
-    cmd = case.toolpath.path.z_at(np.arange(n) / fs)
-    ref = np.concatenate([np.zeros(pre), cmd])
-    load = np.where(np.arange(n + pre) < pre, 0.01, 0.0)  # N, released at 0
-    fe = case.loop.simulate(reference=ref, sensor_noise=s_n,
-                            force=load)["following_error"][pre:]
-    block = TimeBlock(ctx, "running", [{"fe": fe, "command": cmd}], fs, Model())
-    w = block.residual(Model())
-    assert abs(np.mean(w**2) - 1) < 0.05, np.mean(w**2)
-    monkeypatch.setattr(blocks, "free_response_basis",
-                        lambda case, n, fs: np.zeros((n, 0)))
-    ctx.case.__dict__.pop("_record_bases", None)
-    bare = TimeBlock(ctx, "running-bare", [{"fe": fe, "command": cmd}], fs,
-                     Model())
-    ctx.case.__dict__.pop("_record_bases", None)
-    # a 15 % excess over 16 000 values is 19 standard deviations of chi2
-    assert np.mean(bare.residual(Model()) ** 2) > 1.15

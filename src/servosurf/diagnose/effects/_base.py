@@ -408,6 +408,10 @@ class Free:
         else:
             x, lo, hi = v, self.lo, self.hi
         tol = AT_BOUND * (hi - lo)
+        if not self.log and lo == 0.0:
+            # zero is a magnitude's natural floor, not a search limit: a small
+            # amplitude is small, only one pinned at zero sits at the bound
+            return x <= 0.0 or hi - x <= tol
         return x - lo <= tol or hi - x <= tol
 
 

@@ -21,8 +21,10 @@ _SOURCE = (
 
 @dataclass(frozen=True)
 class SensorNonlinearityParams(EffectParams):
-    """The reading is ``y = x + a2 x^2 + a3 x^3``: the loop makes the reading follow
-    the command, so the tool misses by ``-a2 z^2 - a3 z^3`` (outside the loop)."""
+    """The reading is ``y = x + a2 x^2 + a3 x^3``, inside the loop: the loop makes
+    the reading follow the command, so the tool misses by about ``-a2 z^2 - a3
+    z^3``, and the following error carries what the loop's dynamics make of the
+    distorted reading (small, at the command's harmonics)."""
 
     effect = NAME
 
@@ -36,22 +38,24 @@ class SensorNonlinearityParams(EffectParams):
         high=Bound("0.02 / s^2", lambda ev, p: MAX_SHARE / ev.stroke**2),
         source=_SOURCE)
 
-    def path_z(self, t, theta, r, z):
-        """The tool's miss ``-(a2 z^2 + a3 z^3)`` in m at tool heights ``z`` (m)."""
-        return -(self.a2 * z**2 + self.a3 * z**3)
+    def nonlinearity(self):
+        """The loop's sensor-reading fields (the kernel's exact in-loop law)."""
+        return {"sensor_a2": self.a2, "sensor_a3": self.a3}
 
 
 class SensorNonlinearityEffect(TwoCoefficientEffect):
     name = NAME
     title = "Capacitive-sensor nonlinearity"
     physics = (
-        "The reading is y = x + a2 x^2 + a3 x^3; the loop makes the reading "
-        "follow the command, so the tool misses by -a2 z^2 - a3 z^3."
+        "The reading is y = x + a2 x^2 + a3 x^3 inside the loop; the loop "
+        "makes the reading follow the command, so the tool misses by about "
+        "-a2 z^2 - a3 z^3."
     )
     signature = (
-        "Invisible in the following error; maps/profiles: a height-"
-        "dependent error along the cut, identical in every lenslet "
-        "(quadratic: lenslet shape error ~ z^2)."
+        "Maps/profiles: a height-dependent error along the cut, identical "
+        "in every lenslet (quadratic: lenslet shape error ~ z^2); the "
+        "following error only weakly (the loop follows the distorted "
+        "reading), at the command's harmonics."
     )
     confused_with = (
         "force-constant-position and flexure nonlinearity (both show in "
@@ -59,7 +63,7 @@ class SensorNonlinearityEffect(TwoCoefficientEffect):
         "varies across the cut); a sensor gain error looks like "
         "elastic recovery on single-pass lenslets."
     )
-    channels = ("surface", "profile")
+    channels = ("following-error", "cut", "surface", "profile")
     params = SensorNonlinearityParams
     fields = ("a2", "a3")
     labels = ("quadratic (a2)", "cubic (a3)")

@@ -61,6 +61,11 @@ class SpindleAsyncErrorParams(EffectParams):
         return out
 
 
+#: Distance (Hz) from a harmonic of the FTS frequency within which a line is
+#: locked to the lenslet phase: the 1 Hz tolerance of a located map line.
+FTS_LOCK_HZ = 1.0
+
+
 def _spindle_frequency(ev) -> float:
     case = ev.case
     if case is None or case.toolpath is None:
@@ -155,10 +160,19 @@ class SpindleAsyncErrorEffect(Effect):
 
     def implausible(self, model, slot, ev, cfg=None):
         """As :meth:`Effect.implausible`, except that the frequency's search window
-        is centred on the located line (its ends are not bounds of the physics)."""
+        is centred on the located line (its ends are not bounds of the physics);
+        also refused: a frequency on a harmonic of the FTS command (a pattern
+        locked to the lenslet phase is the servo's or the tool's, not the
+        spindle bearing's)."""
         why = self.term(model, slot).implausible(ev)
         if why is not None:
             return why
+        f = self.term(model, slot).frequency
+        k = round(f / ev.fts) if ev.fts > 0 else 0
+        if k >= 1 and abs(f - k * ev.fts) <= FTS_LOCK_HZ:
+            return (f"frequency = {f:.4g} Hz is {k} x the FTS frequency "
+                    f"{ev.fts:.4g} Hz (within {FTS_LOCK_HZ:g} Hz): locked to the "
+                    "lenslet phase, not an asynchronous spindle error")
         for f in self.free(model, slot, ev, cfg)[1:]:
             if f.at_bound(model) and f.field != "amplitude":
                 return (f"{f.field} = {f.get(model):.4g} sits at the bound of its "
