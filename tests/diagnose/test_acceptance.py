@@ -16,7 +16,9 @@ import pytest
 import scipy as sp
 
 from servosurf.diagnose._blocks import Block
+from servosurf.diagnose import _select
 from servosurf.diagnose._select import (
+    FIDELITY_ENR,
     HELD_OUT_ALPHA,
     MAP_WINDOW,
     Engine,
@@ -238,6 +240,74 @@ def test_an_idle_spectrum_alone_does_not_predict_another_recording():
     q, t = _full_fit(eng, eff)
     assert eng.refusal(eff, q, t) is None
     assert eng.recording_refusal(eff, q, t, []) is None
+
+
+# ------------------------------------------------------------ fidelity floor
+def test_signature_is_the_rms_of_the_whitened_change_in_its_largest_recording():
+    rng = np.random.default_rng(11)
+    x_fe, x_map = rng.standard_normal(300), rng.standard_normal(1200)
+    y_fe = rng.standard_normal(300) + 0.3 * x_fe
+    y_map = rng.standard_normal(1200) + 0.3 * x_map
+    blocks = [_Block("fe", "time", y_fe, {"c": x_fe}),
+              _Block("map", "map", y_map, {"c": x_map})]
+    eng = Engine(blocks, None, [], None)
+    eff = _Eff("c")
+    q, t = _full_fit(eng, eff)
+    a = q.a["c"]
+    sig = eng.signature(eff, q, 0)
+    # oracle, plain numpy: RMS of a x over the unit noise RMS, per recording
+    for name, x, y in (("fe", x_fe, y_fe), ("map", x_map, y_map)):
+        rec = sig["by_recording"][name]
+        assert rec["n_values"] == x.size
+        assert rec["signature_enr"] == pytest.approx(
+            math.sqrt(float(np.mean((a * x) ** 2))), rel=1e-9)
+        assert rec["expected_delta_deviance"] == pytest.approx(
+            a**2 * float(x @ x), abs=0.01)
+        obs = float(y @ y) - float((y - a * x) @ (y - a * x))
+        assert rec["delta_deviance"] == pytest.approx(obs, abs=0.01)
+    best = max(("fe", "map"), key=lambda r: sig["by_recording"][r]["signature_enr"])
+    assert sig["recording"] == best
+    assert sig["signature_enr"] == sig["by_recording"][best]["signature_enr"]
+
+
+@pytest.mark.parametrize("share", [0.5, 3.0])
+def test_a_significant_term_below_the_fidelity_floor_is_not_named(share):
+    """A real column at ``share`` times the floor, on enough values that even
+    the small one is significant by far: below the floor it is refused with
+    the reason, above it is admitted."""
+    assert FIDELITY_ENR > 0  # the floor is derived, never switched off
+    n = int(math.ceil(400.0 / FIDELITY_ENR**2))  # deviance ~ 400 share^2
+    rng = np.random.default_rng(12)
+    x = rng.standard_normal(n)
+    y = rng.standard_normal(n) + share * FIDELITY_ENR * x
+    eng = Engine([_Block("map", "map", y, {"c": x})], None, [], None)
+    eff = _Eff("c")
+    q, t = _full_fit(eng, eff)
+    lam = float(y @ y) - float((y - q.a["c"] * x) @ (y - q.a["c"] * x))
+    assert lam > sp.stats.chi2.isf(1e-6, 1)  # significant either way
+    why = eng.refusal(eff, q, t)
+    if share < 1:
+        assert why is not None and "model-fidelity floor" in why
+        assert "map" in why
+    else:
+        assert why is None
+    assert t.evidence["recording"] == "map"
+
+
+def test_the_fidelity_floor_does_not_apply_to_recalibration(monkeypatch):
+    n = 4000
+    rng = np.random.default_rng(13)
+    x = rng.standard_normal(n)
+    y = rng.standard_normal(n) + 0.2 * FIDELITY_ENR * x
+    eng = Engine([_Block("map", "map", y, {"c": x})], None, [], None)
+    eff = _Eff("c")
+    q, t = _full_fit(eng, eff)
+    assert eng.fidelity_refusal(eff, q, t) is not None
+    eff.recalibration = True
+    assert eng.fidelity_refusal(eff, q, t) is None
+    monkeypatch.setattr(_select, "FIDELITY_ENR", 0.0)
+    eff.recalibration = False
+    assert eng.fidelity_refusal(eff, q, t) is None
 
 
 def _meta(sizes):

@@ -291,7 +291,17 @@ def test_cli_writes_fitted_machine_pictures_and_json(blind, tmp_path, capsys):
         "fit_before_percent",
         "fit_after_percent",
         "held_out_improvement",
+        "signature",
+        "indistinguishable_from",
     }
+    # the named term's size: above the model-fidelity floor in its recording
+    from servosurf.diagnose._select import FIDELITY_ENR
+
+    sig = e["signature"]
+    assert sig["signature_enr"] >= FIDELITY_ENR
+    assert sig["recording"] in sig["by_recording"]
+    assert sig["signature_enr"] == max(v["signature_enr"]
+                                       for v in sig["by_recording"].values())
     fitted = load_machine(dest / "fitted-machine.toml")
     d_true = k["truth"]["loop-delay"]["extra_delay_s"] * 199.6e3
     nominal = load_machine().controller.delay

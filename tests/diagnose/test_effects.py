@@ -314,6 +314,25 @@ def test_a_term_beyond_its_bounds_or_at_a_search_bound_is_implausible(small):
     assert "damping_ratio" in mode.implausible(pinned, 0, ev)
     assert mode.implausible(Model.of(E.StructuralModeParams(6100.0, 0.03, 1e-9)), 0,
                             ev) is None
+    # thermal drift: a seed-2 independent case fitted 4.7 um over 0.3 s against
+    # -5.2 um/s (each inside the old 10 um/s bound): the rate alone is now beyond
+    # 1 um/s, and a fast saturating rise with an admissible rate still starts
+    # at 4.7e-6 / 0.3 - 0.5e-6 = 15 um/s
+    drift = get_effect("thermal-drift")
+    old = Model.of(E.ThermalDriftParams(4.69e-6, 0.298, -5.18e-6))
+    assert "rate" in drift.implausible(old, 0, ev)
+    fast = Model.of(E.ThermalDriftParams(4.69e-6, 0.298, -0.5e-6))
+    why = drift.implausible(fast, 0, ev)
+    assert why is not None and "initial drift rate" in why
+    slow = Model.of(E.ThermalDriftParams(0.2e-6, 0.3, -0.1e-6))  # 0.57 um/s
+    assert drift.implausible(slow, 0, ev) is None
+    # a 0.37 um order-3 spindle axial error (a seed-2 null) is no spindle of a
+    # diamond-turning machine; 50 nm is
+    axial = get_effect("spindle-axial-error")
+    assert "above" in axial.implausible(
+        Model.of(E.SpindleAxialErrorParams(3, 3.7e-7, 0.0)), 0, ev)
+    assert axial.implausible(Model.of(E.SpindleAxialErrorParams(3, 5e-8, 0.0)), 0,
+                             ev) is None
 
 
 # ------------------------------------------------------------------ simulate

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import pytest
 
+from servosurf.diagnose._select import FIDELITY_ENR
+
 ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "benchmarks" / "real_cut_1022_diagnose.py"
 SHARED = ROOT.parent / "shared" / "data" / "upm_sts" / "1022"
@@ -92,6 +94,7 @@ def test_real_cut_1022_verdict_is_held_out_or_located(result):
         h = e["held_out_improvement"]
         assert h["passed"] and not h["in_sample_fallback"], e
         assert h["delta_deviance"] > 0, e
+        assert e["signature"]["signature_enr"] >= FIDELITY_ENR, e
     if d["verdict"] == "explained":
         assert d["explanations"]
     else:

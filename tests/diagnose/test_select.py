@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from servosurf.diagnose import Mismatch, Model
+from servosurf.diagnose import _select
 from servosurf.diagnose._select import CHANNEL_RETRIES, Candidate, Engine, Term
 from servosurf.diagnose.effects import BaseLineParams, Config, Evidence
 
@@ -306,8 +307,11 @@ def test_map_starts_exclude_lines_locked_to_the_fts_motion(monkeypatch):
 
 
 # ------------------------------------------------------------------ plausibility
-def test_a_candidate_at_a_bound_is_refused_with_its_reason():
+def test_a_candidate_at_a_bound_is_refused_with_its_reason(monkeypatch):
     from servosurf.diagnose import get_effect
+
+    # no recordings here: the model-fidelity floor (test_acceptance.py) is off
+    monkeypatch.setattr(_select, "FIDELITY_ENR", 0.0)
 
     mode = get_effect("structural-mode")
     eng = Engine([], _ev(fs=2e5), [mode], lambda p: [])
@@ -326,8 +330,10 @@ def test_a_candidate_at_a_bound_is_refused_with_its_reason():
     assert eng._evaluate(ok, Model(), [], 100.0)[0] > 0
 
 
-def test_a_term_the_refit_leaves_implausible_is_dropped():
+def test_a_term_the_refit_leaves_implausible_is_dropped(monkeypatch):
     from servosurf.diagnose import get_effect
+
+    monkeypatch.setattr(_select, "FIDELITY_ENR", 0.0)  # no recordings here
     from servosurf.diagnose.effects import LoopDelayParams, StructuralModeParams
 
     mode, delay = get_effect("structural-mode"), get_effect("loop-delay")
@@ -340,3 +346,36 @@ def test_a_term_the_refit_leaves_implausible_is_dropped():
     assert q == Model.of(LoopDelayParams(1e-6))
     assert [t.effect.name for t in kept] == ["loop-delay"]
     assert "damping_ratio" in eng.refused["structural-mode"].reason
+
+
+# ------------------------------------------------------------------ alternatives
+def test_modules_that_fit_as_well_are_reported_with_the_named_one(monkeypatch):
+    """The round's winner carries every other admitted module whose deviance
+    reduction is within ALTERNATIVE_MARGIN of its own (closest first), never a
+    refused one, a recalibration or another configuration of itself."""
+    from servosurf.diagnose import get_effect
+
+    names = ("elastic-recovery", "tool-radius-error", "tool-wear",
+             "tool-edge-waviness", "recalibration", "thermal-drift")
+    effs = {n: get_effect(n) for n in names}
+    for e in effs.values():  # the models here hold no terms to report
+        monkeypatch.setattr(e, "report", lambda q, slot, _n=e.name: {"of": _n})
+    eng = Engine([], _ev(), list(effs.values()), lambda p: [])
+    m = _select.ALTERNATIVE_MARGIN
+
+    def res(name, lam, score=10.0):
+        return (score, Model(), Term(effs[name], 0, None), lam)
+
+    best = res("elastic-recovery", 144.7)
+    results = [best, res("elastic-recovery", 144.0),      # itself
+               res("tool-wear", 144.5), res("tool-radius-error", 144.6),
+               res("tool-edge-waviness", 144.7 - m - 0.01),  # just outside
+               res("thermal-drift", 144.7, score=-math.inf),  # refused
+               res("recalibration", 150.0)]
+    alts = eng._alternatives(best, results)
+    assert [a["effect"] for a in alts] == ["tool-radius-error", "tool-wear"]
+    assert alts[0]["delta_deviance"] == 144.6
+    assert alts[0]["parameters"] == {"of": "tool-radius-error"}
+    results[4] = res("tool-edge-waviness", 144.7 - m + 0.01)
+    assert "tool-edge-waviness" in [a["effect"] for a in eng._alternatives(best,
+                                                                           results)]

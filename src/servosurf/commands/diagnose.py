@@ -103,7 +103,20 @@ def run(args) -> int:
         print(f"verdict: {d.verdict}")
         for e in d.explanations:
             pars = ", ".join(f"{k} = {v:.4g}" for k, v in e["parameters"].items())
-            print(f"  {e['effect']} (delta BIC {e['delta_bic']:.1f}): {pars}")
+            sig = e.get("signature") or {}
+            size = (f", signature ENR {sig['signature_enr']:.3g} on {sig['recording']}"
+                    if sig.get("recording") else "")
+            print(f"  {e['effect']} (delta BIC {e['delta_bic']:.1f}{size}): {pars}")
+            alts = e.get("indistinguishable_from") or []
+            if alts:
+                names = ", ".join(f"{a['effect']} (dD {a['delta_deviance']:.1f})"
+                                  for a in alts)
+                print(f"    fits no better than {names} (dD {e['delta_deviance']:.1f}): "
+                      f"these recordings cannot tell them apart; "
+                      f"{e.get('told_apart_by', '')}")
+        if not d.explanations and d.refused:
+            r = d.refused[0]
+            print(f"  closest candidate refused: {r['effect']}: {r['reason']}")
         for m in (d.remainder if d.verdict != "consistent" else [])[:5]:
             print(f"  left: {m.recording}: {m.where} (-log10 p {m.significance:.1f})")
         from ._common import _final

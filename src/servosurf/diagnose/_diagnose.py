@@ -78,7 +78,13 @@ class Diagnosis:
         The fitted model (its terms simulate with
         ``simulate(spec, hooks=model.hooks())``).
     explanations : list of dict
-        JSON-ready selected physics terms.
+        JSON-ready selected physics terms: ``effect``, ``parameters`` (SI,
+        unit-suffixed keys), ``delta_bic``, ``delta_deviance``, fit percent
+        before and after, ``held_out_improvement``, ``signature`` (the term's
+        size per recording: observed and expected deviance reduction, values,
+        ``signature_enr`` = RMS of its whitened change over the noise RMS;
+        :meth:`Engine.signature`), ``indistinguishable_from`` (other modules
+        that fit as well, with their parameters) and ``told_apart_by``.
     recalibration : list of dict
         JSON-ready recalibration terms.
     fit_before, fit_after : dict of str to float
@@ -91,7 +97,8 @@ class Diagnosis:
         Candidates that would have been accepted but were refused (physically
         implausible, or not seen where their physics says they must show), most
         promising first: ``effect``, ``parameters`` (SI), ``reason``,
-        ``delta_deviance``, ``score``.
+        ``delta_deviance``, ``score``; a term smaller than the model-fidelity
+        floor (:data:`~servosurf.diagnose._select.FIDELITY_ENR`) is refused too.
     acceptance : dict
         Acceptance rule used (:meth:`Engine.acceptance`): held-out test or the
         in-sample fallback, its significance and the per-recording rule; each
@@ -393,7 +400,21 @@ def _term_dict(t: Term, p: Model, ev: Evidence, fb: dict, fa: dict) -> dict:
         ),
         "fit_after_percent": _mean({k: fa[k] for k in fa if _visible(t.effect, k, ev)}),
         "held_out_improvement": t.held_out,
+        "indistinguishable_from": list(t.alternatives),
+        "told_apart_by": t.effect.confused_with if t.alternatives else "",
     }
+
+
+def _signature(eng: Engine, eff: Effect, p: Model, ts: list[Term]) -> dict:
+    """The size of an effect's terms in every recording (:meth:`Engine.signature`
+    of each slot; several slots: the one with the largest signature)."""
+    sigs = [eng.signature(eff, p, t.slot) for t in ts]
+    out = max(sigs, key=lambda s: s["signature_enr"])
+    out = dict(out)
+    out["signature_enr"] = round(float(out["signature_enr"]), 5)
+    for v in out["by_recording"].values():
+        v["signature_enr"] = round(float(v["signature_enr"]), 5)
+    return out
 
 
 def _visible(eff: Effect, key: str, ev: Evidence) -> bool:
@@ -513,10 +534,13 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
             params.update(eff.report(p, t.slot))
         d = _term_dict(ts[0], p, ev, fb, fa)
         d["parameters"] = params
+        d["signature"] = _signature(eng_final, eff, p, ts)
         d["delta_bic"] = float(sum(t.score for t in ts))
         d["delta_deviance"] = float(sum(t.delta_deviance for t in ts))
         expl.append(d)
     recal_d = [_term_dict(t, p, ev, fb, fa) for t in recal]
+    for d, t in zip(recal_d, recal, strict=True):
+        d["signature"] = _signature(eng_final, t.effect, p, [t])
     remainder = bool(rem_v)
     tentative: list = []
     noise_only = all(getattr(q, "noise_only", lambda: False)()  # noise levels only

@@ -97,6 +97,21 @@ RECORDING_MIN_EXPECTED = 9.0
 #: Function evaluations of the refits on part of the data (held-out and
 #: leave-one-recording-out).
 PART_NFEV = 40
+#: Two modules whose deviance reductions differ by less than this are not told
+#: apart by the data: the chi2(1) quantile at 0.05 (a likelihood ratio of about
+#: 7 between two fits with the same number of parameters).
+ALTERNATIVE_MARGIN = 3.84
+#: Model-fidelity floor: the smallest signature a term may be named for, as the
+#: RMS of its whitened change over the RMS of the noise (1 in whitened units) in
+#: the recording where it is largest (:meth:`Engine.signature`). Two correct
+#: implementations of the same documented machine differ by a little (time
+#: discretisation of the loop and the chip force, the sweep's sampling, the
+#: noise synthesis), and any flexible term absorbs part of that difference; a
+#: term whose whole signature is no larger cannot be told from model error and
+#: is refused (reported with the reason). Derived by
+#: ``benchmarks/discovery/independent/fidelity.py`` from the named terms of the
+#: independent generator's null cases (their largest signature, rounded up).
+FIDELITY_ENR = 0.095
 
 
 def block_split(block, size: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -194,6 +209,11 @@ class Term:
     held_out: dict | None = None
     #: the candidate was refused by the held-out test (no retry of its module)
     held_out_failed: bool = False
+    #: other modules that fit as well (:meth:`Engine._alternatives`)
+    alternatives: list = field(default_factory=list)
+    #: per recording: observed and expected deviance reduction, values and the
+    #: signature's ENR (:meth:`Engine.signature`; JSON-ready)
+    evidence: dict | None = None
 
 
 @dataclass
@@ -540,7 +560,10 @@ class Engine:
             why = self._recordings_disagree(eff, q, term.slot, self._relevant(eff))
             if why is not None:
                 return why
-        return eff.implausible(q, term.slot, self.evidence, term.config)
+        why = eff.implausible(q, term.slot, self.evidence, term.config)
+        if why is not None:
+            return why
+        return self.fidelity_refusal(eff, q, term)
 
     # ------------------------------------------------------------ out of sample
     def recording_gains(self, eff: Effect, q: Model, slot: int,
@@ -568,6 +591,47 @@ class Engine:
                         f"reduction {obs:.1f} there (it predicts {exp:.1f}), "
                         f"{recording_bar(exp):.1f} required")
         return None
+
+    def signature(self, eff: Effect, q: Model, slot: int) -> dict:
+        """Size of term ``slot`` of ``q`` in every recording it touches.
+
+        Returns
+        -------
+        dict
+            ``{"signature_enr": float, "recording": str, "by_recording": {name:
+            {"delta_deviance", "expected_delta_deviance", "n_values",
+            "signature_enr"}}}``: the observed and expected deviance reduction
+            (:meth:`recording_gains`), the values compared (degrees of freedom
+            of the recording's blocks) and ``sqrt(expected / n_values)``, the
+            RMS of the term's whitened change over the noise RMS
+            (dimensionless); the largest of them and its recording.
+        """
+        idx = self._relevant(eff)
+        gains = self.recording_gains(eff, q, slot, idx)
+        n_rec: dict[str, int] = {}
+        for i in idx:
+            b = self.blocks[i]
+            n_rec[b.recording] = n_rec.get(b.recording, 0) + int(b.n)
+        by = {}
+        for rec, (obs, exp, dom) in gains.items():
+            n = max(n_rec.get(rec, 0), 1)
+            by[rec] = {"domain": dom, "delta_deviance": round(obs, 2),
+                       "expected_delta_deviance": round(exp, 2), "n_values": n,
+                       "signature_enr": math.sqrt(max(exp, 0.0) / n)}
+        best = max(by, key=lambda r: by[r]["signature_enr"], default=None)
+        return {"signature_enr": by[best]["signature_enr"] if best else 0.0,
+                "recording": best, "by_recording": by}
+
+    def fidelity_refusal(self, eff: Effect, q: Model, term: Term) -> str | None:
+        """Why the model-fidelity floor refuses the term (None: it does not);
+        the term's :meth:`signature` is kept in ``term.evidence``."""
+        sig = self.signature(eff, q, term.slot)
+        term.evidence = sig
+        if eff.recalibration or sig["signature_enr"] >= FIDELITY_ENR:
+            return None
+        return (f"signature too small to be told from model error: ENR "
+                f"{sig['signature_enr']:.3g} on {sig['recording']}, below the "
+                f"model-fidelity floor {FIDELITY_ENR:g}")
 
     def recording_refusal(self, eff: Effect, q: Model, term: Term,
                           terms: list[Term]) -> str | None:
@@ -779,8 +843,10 @@ class Engine:
             best = None
             refused = []
             nuisance = []
+            results = []
             for c in tried:
                 res = self._evaluate(c, p, terms, d_cur, progress)
+                results.append(res)
                 if res[0] == -math.inf and not res[2].held_out_failed:
                     refused.append(c)
                 elif (c.effect.recalibration
@@ -805,6 +871,7 @@ class Engine:
                 for c in extra:
                     tried.append(c)
                     res = self._evaluate(c, p, terms, d_cur, progress)
+                    results.append(res)
                     if best is None or res[0] > best[0]:
                         best = res
                     if res[0] > -math.inf:
@@ -815,6 +882,7 @@ class Engine:
             score, p, tnew, lam = best
             tnew.delta_deviance = lam
             tnew.score = score
+            tnew.alternatives = self._alternatives(best, results)
             terms.append(tnew)
             self.blocks = self.rebuild(p)
             self._cache.clear()
@@ -827,6 +895,23 @@ class Engine:
         p, terms = self.prune(p, terms)
         p, terms = self.enforce_plausibility(p, terms, progress)
         return p, terms, ranking or []
+
+    def _alternatives(self, best, results: list) -> list[dict]:
+        """Other modules of the round that would have been admitted and fit as
+        well as the winner: deviance reduction within ``ALTERNATIVE_MARGIN``
+        of it (JSON-ready, closest first). The recordings cannot tell them
+        from the named term (for example a depth-proportional sag on spherical
+        lenslets: elastic recovery, a nose-radius error and tool wear)."""
+        eff = best[2].effect
+        out = []
+        for score, q, t, lam in results:
+            if t.effect.name == eff.name or t.effect.recalibration or not score > 0:
+                continue
+            if lam >= best[3] - ALTERNATIVE_MARGIN:
+                out.append({"effect": t.effect.name,
+                            "parameters": t.effect.report(q, t.slot),
+                            "delta_deviance": round(float(lam), 2)})
+        return sorted(out, key=lambda d: -d["delta_deviance"])
 
     def _prefer_nuisance(self, best, nuisance: list, progress=None):
         """The round's winner, unless it is physics that a nuisance term (noise
@@ -859,7 +944,7 @@ class Engine:
             u
             if u.effect is not t.effect or u.slot < t.slot
             else Term(u.effect, u.slot - 1, u.config, u.delta_deviance, u.score,
-                      u.held_out)
+                      u.held_out, evidence=u.evidence, alternatives=u.alternatives)
             for k, u in enumerate(terms)
             if k != j
         ]
@@ -872,6 +957,8 @@ class Engine:
             bad = None
             for j, t in enumerate(terms):
                 why = t.effect.implausible(p, t.slot, self.evidence, t.config)
+                if why is None:
+                    why = self.fidelity_refusal(t.effect, p, t)
                 if why is not None:
                     bad = (j, t, why)
                     break

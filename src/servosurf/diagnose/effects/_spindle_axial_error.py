@@ -26,10 +26,14 @@ class SpindleAxialErrorParams(EffectParams):
         source="the orders the map locator tests (1-40 per revolution: bearing, "
         "motor-pole and cogging orders and their harmonics)")
     amplitude: float = quantity(
-        0.0, unit="m", doc="amplitude a", low=0.0, high=1e-6,
+        0.0, unit="m", doc="amplitude a", low=0.0, high=2e-7,
         source="synchronous axial error motion of ultra-precision air-bearing "
         "spindles is nanometres to tens of nanometres (measured per ISO 230-7; "
-        "Grejda, PhD thesis, Penn State 2002); 1 um is a damaged thrust bearing")
+        "Grejda, PhD thesis, Penn State 2002); 0.2 um in one order is several "
+        "times the loosest diamond-turning spindle and would show as a visible "
+        "spoke pattern on every part (a seed-2 independent null was 'explained' "
+        "by 0.37 um of order 3 over a lenslet map's narrow sector, where it is "
+        "almost all tilt)")
     phase: float = quantity(
         0.0, unit="rad", doc="phase phi", low=None, high=None,
         source="an angle: any value (reported in [-pi, pi))")

@@ -18,6 +18,14 @@ _EXPANSION = (
     "the 10 um level (Bryan, CIRP Ann. 39 (1990) 645)")
 
 
+#: Fastest drift of the tool-to-work distance (m/s).
+MAX_RATE = 1e-6
+_RATE_SOURCE = (
+    _EXPANSION + "; 1 um/s would need the whole loop to warm by 0.3 K/s, while "
+    "spindle and coil warm-up drift by micrometres over tens of minutes (Bryan "
+    "1990)")
+
+
 @dataclass(frozen=True)
 class ThermalDriftParams(EffectParams):
     """Tool-to-work distance drifting with cutting time, ``a (1 - exp(-t / tau)) +
@@ -34,8 +42,22 @@ class ThermalDriftParams(EffectParams):
         "to hours (Bryan 1990); below 20 ms a saturating drift is a step, above "
         "1000 s it is the linear rate over a cut of seconds (not identifiable)")
     rate: float = quantity(
-        unit="m/s", doc="linear drift rate b", low=-10e-6, high=10e-6,
-        source=_EXPANSION + "; 10 um/s would need the loop to warm by 3 K/s")
+        unit="m/s", doc="linear drift rate b", low=-MAX_RATE, high=MAX_RATE,
+        source=_RATE_SOURCE)
+
+    def implausible(self, evidence) -> str | None:
+        """The bounds of each value, and of the drift's fastest rate: ``|a / tau +
+        b|`` at the start of the cut (m/s), as bounded as ``b`` (a fast saturating
+        rise cancelled by a fast linear fall is no slower a warming)."""
+        why = super().implausible(evidence)
+        if why is not None:
+            return why
+        v0 = self.amplitude / max(self.time_constant, 1e-12) + self.rate
+        if abs(v0) > MAX_RATE:
+            return (f"initial drift rate amplitude / time_constant + rate = "
+                    f"{v0:.4g} m/s is beyond its physical bound {MAX_RATE:.4g} m/s "
+                    f"({_RATE_SOURCE})")
+        return None
 
     def path_z(self, t, theta, r, z):
         """The drift in m at times ``t`` (s)."""
@@ -106,5 +128,6 @@ class ThermalDriftEffect(Effect):
                 Free("time_constant", NAME, slot, "time_constant", 0.02, 1e3, True),
             ]
         if form != "exp":
-            out.append(Free("rate", NAME, slot, "rate", -1e-5, 1e-5))
+            out.append(Free("rate", NAME, slot, "rate", -10 * MAX_RATE,
+                            10 * MAX_RATE))
         return out
