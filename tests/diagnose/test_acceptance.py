@@ -291,7 +291,7 @@ def test_a_significant_term_below_the_fidelity_floor_is_not_named(share):
         assert "map" in why
     else:
         assert why is None
-    assert t.evidence["recording"] == "map"
+    assert eng.signature(eff, q, 0)["recording"] == "map"
 
 
 def test_the_fidelity_floor_does_not_apply_to_recalibration(monkeypatch):

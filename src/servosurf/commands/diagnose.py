@@ -111,8 +111,8 @@ def run(args) -> int:
             if alts:
                 names = ", ".join(f"{a['effect']} (dD {a['delta_deviance']:.1f})"
                                   for a in alts)
-                print(f"    fits no better than {names} (dD {e['delta_deviance']:.1f}): "
-                      f"these recordings cannot tell them apart; "
+                print(f"    as good a fit (dD {e['delta_deviance']:.1f}): {names}; "
+                      f"these recordings cannot tell them apart. Told apart by: "
                       f"{e.get('told_apart_by', '')}")
         if not d.explanations and d.refused:
             r = d.refused[0]

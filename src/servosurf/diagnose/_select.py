@@ -211,9 +211,6 @@ class Term:
     held_out_failed: bool = False
     #: other modules that fit as well (:meth:`Engine._alternatives`)
     alternatives: list = field(default_factory=list)
-    #: per recording: observed and expected deviance reduction, values and the
-    #: signature's ENR (:meth:`Engine.signature`; JSON-ready)
-    evidence: dict | None = None
 
 
 @dataclass
@@ -623,11 +620,11 @@ class Engine:
                 "recording": best, "by_recording": by}
 
     def fidelity_refusal(self, eff: Effect, q: Model, term: Term) -> str | None:
-        """Why the model-fidelity floor refuses the term (None: it does not);
-        the term's :meth:`signature` is kept in ``term.evidence``."""
+        """Why the model-fidelity floor refuses the term (None: it does not)."""
+        if eff.recalibration:
+            return None
         sig = self.signature(eff, q, term.slot)
-        term.evidence = sig
-        if eff.recalibration or sig["signature_enr"] >= FIDELITY_ENR:
+        if sig["signature_enr"] >= FIDELITY_ENR:
             return None
         return (f"signature too small to be told from model error: ENR "
                 f"{sig['signature_enr']:.3g} on {sig['recording']}, below the "
@@ -944,7 +941,7 @@ class Engine:
             u
             if u.effect is not t.effect or u.slot < t.slot
             else Term(u.effect, u.slot - 1, u.config, u.delta_deviance, u.score,
-                      u.held_out, evidence=u.evidence, alternatives=u.alternatives)
+                      u.held_out, alternatives=u.alternatives)
             for k, u in enumerate(terms)
             if k != j
         ]
