@@ -425,8 +425,14 @@ def summarise(rows: list[dict], key: dict) -> dict:
 
 
 def _pct(x) -> str:
-    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else (
-        f"{100 * x:.0f} %")
+    """A relative error as a percentage; ``n/a`` without a comparable truth and
+    ``unmatched`` when the named term has no component to compare (an infinite
+    error: another spindle order, no line near the true frequency)."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "n/a"
+    if math.isinf(x):
+        return "unmatched"
+    return f"{100 * x:.0f} %"
 
 
 def table(m: dict) -> str:
