@@ -16,6 +16,10 @@ A *hook* is any object with any of these optional methods (SI units throughout):
   disturbance PSDs from it);
 * ``workpiece(workpiece) -> Workpiece``: a changed work material (cutting force);
 * ``tool(tool) -> Tool``: a changed tool (edge waviness, nose radius);
+* ``cutting_rules(rules) -> CuttingRules``: changed material rules of the
+  time-ordered sweep (:class:`servosurf.toolpath.CuttingRules`, heights in m: a
+  minimum chip thickness below which a pass ploughs instead of cutting); any
+  rule that is not zero switches the simulator to the ordered sweep;
 * ``path_z(t, theta, r, z) -> dz``: tool-height terms outside the loop in m at times
   ``t`` (s), spindle angles ``theta`` (rad), radii ``r`` (m) and deterministic tool
   heights ``z`` (m: the command plus the loop's tracking and force deviations);
@@ -57,6 +61,7 @@ HOOKS = (
     "machine",
     "workpiece",
     "tool",
+    "cutting_rules",
     "path_z",
     "surface",
 )
@@ -140,7 +145,7 @@ def compose_sensor_lines(hooks: Sequence[Any]) -> tuple[tuple[float, float], ...
 
 def apply_hooks(hooks: Sequence[Any], method: str, obj):
     """``obj`` passed through the ``method`` hooks (``machine``, ``workpiece``,
-    ``tool``) in order."""
+    ``tool``, ``cutting_rules``) in order."""
     for h in hooks:
         if hasattr(h, method):
             obj = getattr(h, method)(obj)

@@ -84,7 +84,7 @@ def outside_loop(loop, parts: Sequence[str], n: int,
 
 
 def machine_surface(path, tool, field, initial, workpiece, parts: Sequence[str], *,
-                    n_threads: int | None = None):
+                    hooks: Sequence = (), n_threads: int | None = None):
     """The machined map: the envelope, or the ordered sweep with material parts.
 
     Parameters
@@ -101,6 +101,9 @@ def machine_surface(path, tool, field, initial, workpiece, parts: Sequence[str],
         Its material holds the rule ratios.
     parts : sequence of str
         Parts switched on.
+    hooks : sequence, optional
+        Model hooks; their ``cutting_rules`` methods change the rules of the parts
+        (a catalogue effect's minimum chip thickness, for example).
     n_threads : int, optional
         Numba threads.
 
@@ -109,10 +112,12 @@ def machine_surface(path, tool, field, initial, workpiece, parts: Sequence[str],
     Surface
         Heights in m.
     """
+    from ._hooks import apply_hooks
     from .cutting import cutting_rules
     from .toolpath import sweep, sweep_ordered
 
-    rules = cutting_rules(workpiece.material, tool, parts)
+    rules = apply_hooks(hooks, "cutting_rules",
+                        cutting_rules(workpiece.material, tool, parts))
     if rules.is_kinematic:
         return sweep(path, tool, field, initial=initial, n_threads=n_threads)
     return sweep_ordered(path, tool, field, rules=rules, initial=initial,

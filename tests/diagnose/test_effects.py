@@ -37,6 +37,12 @@ CHANGED = 1e-3
 SURFACE_RTOL = 0.03
 
 NAMES = [e.name for e in CATALOGUE]
+#: Effects a single-pass lenslet cut cannot show: ploughing acts where a pass meets
+#: less than h_min of material, which on a lenslet is only the rim (left out of
+#: the likelihood with the cut edge). Their changed set on the small lenslet case
+#: is empty; their surface contract is on a facing cut
+#: (tests/diagnose/test_minimum_chip_thickness.py).
+OVERLAP_ONLY = {"minimum-chip-thickness"}
 
 
 def _term(name: str, case, ev):
@@ -102,6 +108,8 @@ def _term(name: str, case, ev):
                                               dead_band=2e-4),)
     if name == "sensor-pickup-lines":
         return (E.SensorPickupParams(150.0, 2e-9), E.SensorPickupParams(2330.0, 1e-9))
+    if name == "minimum-chip-thickness":
+        return (E.MinimumChipThicknessParams(20e-9),)
     raise KeyError(name)
 
 
@@ -205,7 +213,8 @@ def test_term_changes_exactly_the_recordings_its_channels_name(name, small):
         elif b.kind not in eff.channels:
             assert rms == 0.0, (name, b.recording, rms)
     present = {b.kind for b in blocks}
-    assert changed == set(eff.channels) & present, (name, sorted(changed))
+    want = set() if name in OVERLAP_ONLY else set(eff.channels) & present
+    assert changed == want, (name, sorted(changed))
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -337,7 +346,8 @@ def test_a_term_beyond_its_bounds_or_at_a_search_bound_is_implausible(small):
 
 # ------------------------------------------------------------------ simulate
 #: Effects whose hooks change the machined surface (the rest act on noise only).
-MAP_VISIBLE = [e.name for e in CATALOGUE if "surface" in e.channels]
+MAP_VISIBLE = [e.name for e in CATALOGUE
+               if "surface" in e.channels and e.name not in OVERLAP_ONLY]
 
 
 @pytest.fixture(scope="module")

@@ -944,7 +944,7 @@ class PointsBlock(Block):
     """
 
     #: what the heights depend on (the lines are projected out of the residual)
-    predict_groups = SIM_GROUPS + ("path_z", "tool", "surface")
+    predict_groups = SIM_GROUPS + ("path_z", "tool", "cutting_rules", "surface")
     groups = predict_groups + ("base_lines",)
 
     @property

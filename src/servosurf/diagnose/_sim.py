@@ -140,6 +140,30 @@ class CaseModel:
                 dev = w if dev is None else dev + w
         return d_r, dev
 
+    def min_chip_thickness(self, model: Model) -> float:
+        """Minimum chip thickness h_min in m of ``model``'s ``cutting_rules`` hooks
+        (0: every pass that reaches a point cuts it, the kinematic envelope).
+
+        Raises
+        ------
+        ConfigError
+            When a hook sets a rule the pointwise model does not evaluate (side
+            flow, recovery of the ordered sweep).
+        """
+        hooks = model.hooks("cutting_rules")
+        if not hooks:
+            return 0.0
+        from ..errors import ConfigError
+        from ..toolpath import CuttingRules
+
+        rules = _hooks.apply_hooks(hooks, "cutting_rules", CuttingRules())
+        if (rules.side_flow_height or rules.side_flow_width or rules.recovery_height
+                or rules.recovery_decay):
+            raise ConfigError("the diagnosis's surface model evaluates the minimum "
+                              "chip thickness only (allowed: side flow and recovery "
+                              "rules of 0)")
+        return float(rules.min_chip_thickness)
+
     def surface_heights(self, model: Model, z: np.ndarray, top: float) -> np.ndarray:
         """Point heights ``z`` (m) through ``model``'s surface terms (pre-cut
         height ``top`` in m)."""

@@ -38,6 +38,7 @@ __all__ = [
     "ToolTrajectory",
     "tool_trajectory",
     "trajectory_samples",
+    "ordered_heights",
     "surface_heights",
 ]
 
@@ -332,6 +333,50 @@ def tool_trajectory(
     return ToolTrajectory(t, x1, period)
 
 
+def ordered_heights(h: np.ndarray, t: np.ndarray, top: float,
+                    h_min: float) -> tuple[np.ndarray, np.ndarray]:
+    """Heights left by passes in time order with a minimum chip thickness.
+
+    A point starts at the pre-cut height ``top``; each pass, in the order of its
+    time, removes material only where it meets more than ``h_min`` of it (its edge
+    lies more than ``h_min`` below the current height); a thinner sliver is
+    ploughed and stays (the rule of :class:`servosurf.toolpath.CuttingRules`).
+    With ``h_min = 0`` this is the lower envelope capped at ``top``.
+
+    Parameters
+    ----------
+    h : ndarray of shape (n, passes)
+        Edge height of each pass at each point in m (inf: the pass does not
+        reach the point).
+    t : ndarray of shape (n, passes)
+        Time of each pass in s.
+    top : float
+        Pre-cut height in m.
+    h_min : float
+        Minimum chip thickness in m (>= 0).
+
+    Returns
+    -------
+    z : ndarray of shape (n,)
+        Heights in m.
+    k : ndarray of shape (n,)
+        Index of the pass that cut last (-1: no pass cut the point).
+    """
+    n = h.shape[0]
+    tt = np.where(np.isfinite(h), t, np.inf)
+    order = np.argsort(tt, axis=1, kind="stable")
+    rows = np.arange(n)
+    z = np.full(n, float(top))
+    k = np.full(n, -1, dtype=np.int64)
+    for j in range(h.shape[1]):
+        col = order[:, j]
+        he = h[rows, col]
+        cuts = z - he > h_min
+        z = np.where(cuts, he, z)
+        k = np.where(cuts, col, k)
+    return z, k
+
+
 def surface_heights(
     case: CaseModel,
     pts: PointSet,
@@ -396,10 +441,16 @@ def surface_heights(
             arc = arc - dev / np.cos(phi)
     h = np.full(pts.t.shape, np.inf)
     h.ravel()[pts.flat] = zt + arc
-    k = np.argmin(h, axis=1)
-    hmin = h[np.arange(h.shape[0]), k]
-    cut = hmin < top
-    z = np.where(cut, hmin, top)
+    h_min = case.min_chip_thickness(p) if p.hooks("cutting_rules") else 0.0
+    if h_min > 0.0:
+        z, k = ordered_heights(h, pts.t, top, h_min)
+        cut = k >= 0
+        hmin = np.min(h, axis=1)
+    else:
+        k = np.argmin(h, axis=1)
+        hmin = h[np.arange(h.shape[0]), k]
+        cut = hmin < top
+        z = np.where(cut, hmin, top)
     z = case.surface_heights(p, z, top)
     if return_pass:
         # how far the runner-up pass is above the active one (inf: only one pass)

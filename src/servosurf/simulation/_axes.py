@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from .. import _progress
+from .. import _parts, _progress
 from ..errors import ConfigError
-from ..toolpath import check_clearance, sample, sweep
+from ..toolpath import check_clearance, sample
 from ._common import (
     KINEMATIC,
     MAX_SPAN_SAMPLES,
@@ -60,7 +60,7 @@ def simulate_axes(spec, tool, machine, workpiece, parts, *, seed: int, instrumen
     instrument : Interferometer, str or None
         Interferometer model, as for :func:`~servosurf.simulation.simulate`.
     hooks : sequence
-        Model hooks (``path_z`` and ``surface`` are applied).
+        Model hooks (``path_z``, ``cutting_rules`` and ``surface`` are applied).
     n_threads : int or None
         Numba threads of the kernel.
 
@@ -139,8 +139,10 @@ def simulate_axes(spec, tool, machine, workpiece, parts, *, seed: int, instrumen
         rate_note = "axis sample rate"
     check_clearance(path, tool)
     with _progress.stage(f"kernel on {spec.field.ny} x {spec.field.nx} grid"):
-        surface = sweep(path, tool, kfield, initial=_initial(spec, workpiece),
-                        n_threads=n_threads)
+        # the envelope, or the ordered sweep when a hook sets material rules
+        surface = _parts.machine_surface(path, tool, kfield,
+                                         _initial(spec, workpiece), workpiece, (),
+                                         hooks=hooks, n_threads=n_threads)
         surface = _physical(spec, surface)
     ctx = {"spec": spec, "machine": machine, "workpiece": workpiece, "t": t,
            "z_command": z_cmd,

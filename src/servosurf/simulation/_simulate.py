@@ -343,7 +343,7 @@ def simulate(
         else:
             surface = _parts.machine_surface(path, tool, kfield,
                                              _initial(spec, workpiece), workpiece,
-                                             parts, n_threads=n_threads)
+                                             parts, hooks=hooks, n_threads=n_threads)
         surface = _physical(spec, surface)
 
     ctx = {

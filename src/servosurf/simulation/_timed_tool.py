@@ -61,14 +61,16 @@ def timed_tool_surface(path, tool, field, initial, workpiece, parts, hooks, *,
     Surface
         Heights in m.
     """
+    from .._hooks import apply_hooks
     from .._parts import machine_surface
     from ..cutting import cutting_rules
 
-    if not cutting_rules(workpiece.material, tool, parts).is_kinematic:
+    if not apply_hooks(hooks, "cutting_rules",
+                       cutting_rules(workpiece.material, tool, parts)).is_kinematic:
         raise ConfigError(
             "a tool that changes in time (tool_at hook) is swept as an envelope; "
             "allowed only without the material parts (ploughing, side-flow, "
-            "recovery)")
+            "recovery) and without a minimum-chip-thickness term")
     if path.n < 2:
         return machine_surface(path, _tool_at(hooks, tool, 0.0), field, initial,
                                workpiece, parts, n_threads=n_threads)

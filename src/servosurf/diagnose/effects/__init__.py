@@ -9,14 +9,14 @@ optional refinement) and its report. :mod:`._base` defines the protocol
 (:class:`EffectParams`, :class:`Effect`, :class:`Model`, :class:`Evidence`). The
 diagnosis's engine, blocks, locators and report know no effect by name.
 
-Adding an effect (the 18th)
+Adding an effect (the 23rd)
 ---------------------------
 1. Write ``_my_effect.py`` next to the others: a frozen ``MyEffectParams(EffectParams)``
    with ``effect = "my-effect"``, every field declared with :func:`quantity` (unit,
    ``low``/``high`` physical bounds, ``source``), and the hook methods its physics
    needs (``perturbation``, ``nonlinearity``, ``base_lines``, ``machine``,
    ``workpiece``, ``tool`` + ``edge`` (+ ``tool_at`` + ``edge_at`` for a tool
-   changing in time), ``path_z``, ``surface`` +
+   changing in time), ``cutting_rules``, ``path_z``, ``surface`` +
    ``surface_heights``); and a ``MyEffect(Effect)`` with its documentation,
    ``channels``, ``params = MyEffectParams``, ``columns``, ``start`` and ``free``
    (``configs``, ``refine`` and ``channel_bar`` when it needs them).
@@ -63,6 +63,10 @@ from ._force_constant_position import (
 )
 from ._friction import FrictionEffect, FrictionParams
 from ._loop_delay import LoopDelayEffect, LoopDelayParams
+from ._minimum_chip_thickness import (
+    MinimumChipThicknessEffect,
+    MinimumChipThicknessParams,
+)
 from ._recalibration import RecalibrationEffect, RecalibrationParams
 from ._sensor_noise_shape import SensorNoiseShapeEffect, SensorNoiseShapeParams
 from ._sensor_nonlinearity import SensorNonlinearityEffect, SensorNonlinearityParams
@@ -111,6 +115,7 @@ __all__ = [
     "FrictionParams",
     "ConverterQuantisationParams",
     "SensorPickupParams",
+    "MinimumChipThicknessParams",
 ]
 
 #: The catalogue, in the order ``servosurf diagnose --list`` prints it.
@@ -136,6 +141,7 @@ CATALOGUE: tuple[Effect, ...] = (
     FrictionEffect(),
     ConverterQuantisationEffect(),
     SensorPickupLinesEffect(),
+    MinimumChipThicknessEffect(),
 )
 
 set_catalogue_order([e.name for e in CATALOGUE])
