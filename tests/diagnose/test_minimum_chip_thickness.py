@@ -117,3 +117,40 @@ def test_simulate_with_the_term_is_the_diagnosis_surface(facing):
     rt = float(np.ptp(res.surface.z[1]))
     kin = f * f / (8 * R)
     assert rt > kin + 0.5 * 2e-9
+
+
+@pytest.mark.slow
+def test_ploughing_simulated_on_an_nc_spiral_is_named(tmp_path, capsys):
+    """``simulate --parts ... ploughing`` (the ordered kernel over the whole cut
+    from its start, with the tool noise) -> diagnose names the minimum chip
+    thickness it was simulated with, out of sample, within 10 %.
+
+    The NC spiral of the null contract (10 um/rev, R 0.5 mm: f^2/2R = 100 nm)
+    with a cutting-edge radius of 80 nm: h_min = 0.25 x 80 nm = 20 nm (the work
+    material's ratio); without ploughing the same case is "consistent"
+    (tests/diagnose/test_null_contract.py)."""
+    import json
+
+    from servosurf.cli import main
+    from servosurf.cutting import Material
+
+    from .test_null_contract import write_nc_spiral
+
+    tp = write_nc_spiral(tmp_path)
+    tp.write_text(tp.read_text().replace(
+        "nose-radius = 0.5e-3  # m\n", "nose-radius = 0.5e-3  # m\nedge-radius = 80e-9  # m\n"))
+    truth = Material().min_chip_thickness_ratio * 80e-9
+    sim = tmp_path / "sim"
+    assert main(["-q", "simulate", str(tp), "--machine", "seed-prototype",
+                 "--instrument", "none", "--seed", "4", "--no-render", "--parts",
+                 "tracking", "vibration", "ploughing", "--out", str(sim)]) == 0
+    capsys.readouterr()
+    assert main(["-q", "diagnose", str(sim / "manifest.toml"), "--out",
+                 str(tmp_path / "d"), "--json"]) == 0
+    verdict = json.loads(capsys.readouterr().out)
+    ex = sorted(verdict["explanations"], key=lambda e: -e["delta_bic"])
+    assert verdict["verdict"] in ("explained", "partly-explained"), verdict["verdict"]
+    assert ex and ex[0]["effect"] == "minimum-chip-thickness", [e["effect"] for e in ex]
+    h = ex[0]["parameters"]["h_min_m"]
+    assert abs(h - truth) <= 0.10 * truth, (h, truth)
+    assert ex[0]["held_out_improvement"]["passed"]

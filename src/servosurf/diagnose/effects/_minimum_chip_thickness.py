@@ -6,7 +6,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from ._base import Effect, EffectParams, Free, quantity
+import numpy as np
+
+from ._base import Config, Effect, EffectParams, Free, quantity
 
 __all__ = ["MinimumChipThicknessParams", "MinimumChipThicknessEffect"]
 
@@ -14,8 +16,10 @@ NAME = "minimum-chip-thickness"
 
 #: Largest minimum chip thickness accepted as physics, m.
 H_MIN_MAX = 50e-9
-#: Thickness step of the screening column and scale of the start, m.
-PROBE = 2e-9
+#: Smallest and number of the screened levels of h_min (m; log-spaced up to the
+#: search's top).
+LEVEL_MIN = 2e-9
+N_LEVELS = 7
 #: Share of f^2 / 2R (the thickness a pass meets at the bottom of the previous
 #: one) up to which the pointwise model is searched on cuts whose passes overlap.
 WINDOW_SHARE = 0.9
@@ -99,27 +103,34 @@ class MinimumChipThicknessEffect(Effect):
     channels = ("surface", "profile")
     params = MinimumChipThicknessParams
 
-    def _current(self, model):
-        ps = model.get(NAME)
-        return ps[0].h_min if ps else 0.0
+    threshold = True
 
     def _search_max(self, ev) -> float:
         lim = overlap_limit(ev)
         return 4 * H_MIN_MAX if lim is None else min(4 * H_MIN_MAX, lim)
 
+    def configs(self, ev, model):
+        # a threshold: the surface change is not linear in h_min (the ploughed
+        # band is R h_min / f wide and up to h_min high, often below a pixel), so
+        # the candidates are levels, searched between neighbours on the deviance
+        top = self._search_max(ev)
+        return [Config(f"{h * 1e9:.3g} nm", {"h": float(h)})
+                for h in np.geomspace(min(LEVEL_MIN, 0.5 * top), top, N_LEVELS)]
+
+    def _term(self, model, cfg):
+        return model.with_terms(NAME, (MinimumChipThicknessParams(cfg.values["h"]),))
+
     def columns(self, model, cfg, ev):
-        step = min(PROBE, 0.25 * self._search_max(ev))
-        q = MinimumChipThicknessParams(self._current(model) + step)
-        return [(model.with_terms(NAME, (q,)), step)]
+        return [(self._term(model, cfg), 1.0)]
 
     def start(self, model, cfg, coefs, ev):
-        step = min(PROBE, 0.25 * self._search_max(ev))
-        h = min(max(step * float(coefs[0]), step), 0.5 * self._search_max(ev))
-        return model.with_terms(NAME, (MinimumChipThicknessParams(h),))
+        return self._term(model, cfg)
 
     def free(self, model, slot, ev, cfg=None):
-        # h_min >= 0 (a pass never removes more than it meets); the search may go
-        # beyond the physical bound so that a fit that wants more is seen and
-        # refused, not clipped into a plausible-looking value; on overlapping
-        # passes it stops where the pointwise model stops holding
-        return [Free("h_min", NAME, slot, "h_min", 0.0, self._search_max(ev))]
+        # h_min > 0 (a pass never removes more than it meets; searched in log);
+        # the search goes beyond the physical bound so that a fit that wants
+        # more is seen and refused, not clipped into a plausible-looking value;
+        # on overlapping passes it stops where the pointwise model stops holding
+        top = self._search_max(ev)
+        return [Free("h_min", NAME, slot, "h_min", min(LEVEL_MIN, 0.5 * top) / 10,
+                     top, True)]
