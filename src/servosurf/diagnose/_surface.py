@@ -14,7 +14,10 @@ at the pass times for a tool that changes in time). The tool
 height ``z_tool(t) = x1(t) + d_path(t, theta)`` is the deterministic loop
 response (periodic after the start-up, extended periodically) plus the model's
 outside-the-loop ``path_z`` terms; its surface terms (``surface_heights`` hooks,
-e.g. elastic recovery) act on the result.
+e.g. elastic recovery) act on the result. With a minimum chip thickness (a
+``cutting_rules`` hook) the passes are applied in time order instead, each cutting
+only where it meets more than ``h_min`` (:func:`ordered_heights`, the rule of the
+simulator's ordered sweep).
 
 For lenslet paths each ring passes a point once; for facing the nearest five passes
 are evaluated. Written for the diagnosis (no dependency on the surface simulator);
