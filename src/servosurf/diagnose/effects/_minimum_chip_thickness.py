@@ -112,7 +112,11 @@ class MinimumChipThicknessEffect(Effect):
     def configs(self, ev, model):
         # a threshold: the surface change is not linear in h_min (the ploughed
         # band is R h_min / f wide and up to h_min high, often below a pixel), so
-        # the candidates are levels, searched between neighbours on the deviance
+        # the candidates are levels, searched between neighbours on the deviance.
+        # None on a single-pass cut (lenslets): there it acts only at the rim,
+        # which the map and profile likelihoods leave out with the cut edge
+        if overlap_limit(ev) is None:
+            return []
         top = self._search_max(ev)
         return [Config(f"{h * 1e9:.3g} nm", {"h": float(h)})
                 for h in np.geomspace(min(LEVEL_MIN, 0.5 * top), top, N_LEVELS)]
