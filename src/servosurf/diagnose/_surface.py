@@ -444,7 +444,7 @@ def surface_heights(
             arc = arc - dev / np.cos(phi)
     h = np.full(pts.t.shape, np.inf)
     h.ravel()[pts.flat] = zt + arc
-    h_min = case.min_chip_thickness(p) if p.hooks("cutting_rules") else 0.0
+    h_min = case.min_chip_thickness(p)  # 0 without a cutting_rules hook
     if h_min > 0.0:
         z, k = ordered_heights(h, pts.t, top, h_min)
         cut = k >= 0
