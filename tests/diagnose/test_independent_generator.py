@@ -407,6 +407,34 @@ def test_case_is_scaled_to_its_enr_and_the_key_seals(ind, tmp_path):
         G.unseal(tmp_path)
 
 
+def test_strength_search_stays_below_the_plausible_maximum(ind, monkeypatch):
+    """An effect whose target ENR needs an implausible strength is not generated
+    at it: the search returns a strength <= s_max and an ENR short of the target
+    (make_case then redraws). The ENR is a stub, ENR = s / 1e-3, so the test checks
+    the search, not the simulator."""
+    G, E, CP = ind.generate, ind.effects, ind.campaign
+    ctx = CP.context()
+    eff = E.tool_wear(np.random.default_rng(0), ctx)
+    p = ctx.path
+    # the cap: 10 % of the nose radius over the whole cut
+    assert eff.s_max * p.omega * p.r0 * p.cut_fraction * p.duration == pytest.approx(
+        0.1 * p.nose_radius, rel=1e-12)
+    calls = []
+
+    def stub(ctx_, camp, eff_, s, seed, rec0, sigma):
+        calls.append(s)
+        return {"map": s / 1e-3}
+
+    monkeypatch.setattr(G, "measure_enr", stub)
+    cap = dataclasses.replace(eff, s_max=1e-4, s0=1e-5)
+    s, e, _ = G.scale_to_enr(ctx, None, cap, 0.3, 0, None, None)
+    assert s <= 1e-4 and e < 0.3 / G.ENR_TOLERANCE
+    assert max(calls) <= 1e-4  # no simulation beyond the cap
+    free = dataclasses.replace(eff, s_max=math.inf, s0=1e-5)
+    s, e, _ = G.scale_to_enr(ctx, None, free, 0.3, 0, None, None)
+    assert e == pytest.approx(0.3, rel=0.03) and s == pytest.approx(3e-4, rel=0.03)
+
+
 # ------------------------------------------------------------------ scorer
 def test_physical_bounds_refuse_the_issue_examples(ind):
     S = ind.score

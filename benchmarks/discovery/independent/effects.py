@@ -92,6 +92,10 @@ class Effect:
     channels: tuple[str, ...]  # "fe", "frf", "map", "cut"
     needs_noise: bool = False
     form: str = ""
+    #: Largest physically plausible strength (same unit as ``s``): a case whose
+    #: target ENR needs more is redrawn, never generated (a 2.5 km nose radius
+    #: "wear" reached ENR 0.3 on a ring profile before this cap existed).
+    s_max: float = math.inf
 
 
 #: FRF excitation amplitude of the (stepped-sine) FRF measurements, m.
@@ -477,7 +481,11 @@ def tool_wear(rng, ctx) -> Effect:
                            "radius_growth_over_cut": s * v * ctx.path.duration},
                     comparable={"radius_growth_rate": s * v})
 
-    return Effect("tool-wear", "catalogue", ("tool-wear",), make, 1e-4, ("map",))
+    # plausible: the radius grows by at most 10 % over the whole cut (the cut is
+    # metres of cutting length; diamond edges wear over kilometres)
+    s_max = 0.1 * R0 / (v * ctx.path.duration)
+    return Effect("tool-wear", "catalogue", ("tool-wear",), make, min(1e-4, s_max),
+                  ("map",), s_max=s_max)
 
 
 def async_spindle(rng, ctx) -> Effect:

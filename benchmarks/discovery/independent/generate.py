@@ -134,6 +134,8 @@ def scale_to_enr(ctx, camp, eff, target, seed, rec0, sigma, *, max_eval: int = 1
     """
 
     def f(s):
+        if s > eff.s_max:  # physically implausible: treated like an unstable loop
+            return math.inf, {"implausible": math.inf}
         e = measure_enr(ctx, camp, eff, s, seed, rec0, sigma)
         return (max(e.values()) if e else 0.0), e
 
