@@ -142,6 +142,17 @@ def test_wheel_install_runs_every_readme_command(tmp_path):
             if command == "servosurf paper":
                 assert "skipped" not in res.stdout + res.stderr  # surface rows ran
                 assert "5 um lenslet: maximum form error" in res.stdout
+                # the reduced calibration re-run (calibrate(reduced_from=machine)):
+                # every calibrated number within COMPARE_RTOL of the shipped one.
+                # This is the suite's only run of it (150 s).
+                from servosurf.calibration import COMPARE_RTOL
+
+                m = re.search(r"calibration re-run: (\d+) constants, largest relative "
+                              r"difference (\S+) \((within|OUTSIDE) (\S+)\)", res.stdout)
+                assert m, res.stdout[-2000:]
+                assert int(m.group(1)) >= 12 and m.group(3) == "within", m.group(0)
+                assert float(m.group(4)) == COMPARE_RTOL
+                assert float(m.group(2)) <= COMPARE_RTOL
 
     run(jobs[0])  # compiles and caches the kernel; then two at a time (2 cores)
     from concurrent.futures import ThreadPoolExecutor

@@ -223,8 +223,8 @@ def test_lenslet_cut_hits_the_calibrated_deviation(machine):
 
 # The reduced re-run from the paper's figures (calibrate(reduced_from=machine), every
 # calibrated number within COMPARE_RTOL of the shipped one) is checked once, through
-# the command that runs it: tests/commands/test_servo_commands.py::
-# test_paper_calibration_rerun_reproduces_the_shipped_constants (150 s; it ran twice).
+# the command that runs it: `servosurf paper` in tests/commands/test_wheel_install.py
+# (150 s; it ran three times).
 
 
 def test_a_changed_number_loses_the_builtin_label(tmp_path):
