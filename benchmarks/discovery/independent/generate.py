@@ -195,6 +195,18 @@ def _jsonable(x):
     return x
 
 
+def draw(rng, name: str, ctx):
+    """One draw of case ``name``: ``(effect, campaign, noise seed)`` from ``rng``
+    (the case's generator; :mod:`oracle` replays the same sequence)."""
+    eff = E.ALL[name](rng, ctx)
+    camp = CP.draw_campaign(rng, eff.channels, ctx)
+    if name == "null-lowfreq":
+        camp.low_freq_base = True
+    elif name == "null-nominal":
+        camp.low_freq_base = False
+    return eff, camp, int(rng.integers(2**31))
+
+
 def make_case(index: int, spec: dict, seed: int, folder: Path, *,
               chip_hold: bool = False) -> dict:
     """Draw, scale and write one case; returns its key entry."""
@@ -204,13 +216,7 @@ def make_case(index: int, spec: dict, seed: int, folder: Path, *,
     name = spec["effect"]
     entry = {"effect": name, "enr_target": spec["enr"]}
     for _draw in range(MAX_DRAWS):
-        eff = E.ALL[name](rng, ctx)
-        camp = CP.draw_campaign(rng, eff.channels, ctx)
-        if name == "null-lowfreq":
-            camp.low_freq_base = True
-        elif name == "null-nominal":
-            camp.low_freq_base = False
-        nseed = int(rng.integers(2**31))
+        eff, camp, nseed = draw(rng, name, ctx)
         if eff.klass == "null":
             s, e, per = 0.0, 0.0, {}
             sp = eff.make(0.0)

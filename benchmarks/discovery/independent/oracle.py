@@ -56,21 +56,13 @@ def replay(key: dict, index: int):
     import numpy as np
 
     from independent import campaign as CP
-    from independent import effects as E
-    from independent.generate import MAX_DRAWS
+    from independent.generate import MAX_DRAWS, draw
 
     entry = key["cases"][index]
     ctx = CP.context(key.get("chip_force", "continuous") == "held")
     rng = np.random.default_rng([key["seed"], index])
-    name = entry["effect"]
     for _ in range(MAX_DRAWS):
-        eff = E.ALL[name](rng, ctx)
-        camp = CP.draw_campaign(rng, eff.channels, ctx)
-        if name == "null-lowfreq":
-            camp.low_freq_base = True
-        elif name == "null-nominal":
-            camp.low_freq_base = False
-        nseed = int(rng.integers(2**31))
+        eff, camp, nseed = draw(rng, entry["effect"], ctx)
         if nseed == entry["noise_seed"]:
             return ctx, eff, camp, nseed
     raise RuntimeError(f"{entry['case']}: the key's noise seed is not reproduced")

@@ -934,10 +934,12 @@ def _lower_inverse(ch: np.ndarray) -> np.ndarray:
 def _lower_block_diag(blocks: list[np.ndarray]) -> "sp.sparse.csr_matrix":
     """Block-diagonal CSR matrix of dense lower-triangular blocks (their lower
     triangles stored, zeros included)."""
+    if not blocks:
+        return sp.sparse.csr_matrix((0, 0))
     sizes = [b.shape[0] for b in blocks]
     offs = np.concatenate([[0], np.cumsum(sizes)])
     data, indices, nnz = [], [], [np.zeros(1, dtype=np.int64)]
-    for b, o in zip(blocks, offs[:-1], strict=False):
+    for b, o in zip(blocks, offs[:-1], strict=True):
         r, c = np.tril_indices(b.shape[0])
         data.append(b[r, c])
         indices.append(c + o)
@@ -945,8 +947,6 @@ def _lower_block_diag(blocks: list[np.ndarray]) -> "sp.sparse.csr_matrix":
     row_nnz = np.concatenate(nnz)
     indptr = np.cumsum(row_nnz)
     n = int(offs[-1])
-    if not blocks:
-        return sp.sparse.csr_matrix((0, 0))
     return sp.sparse.csr_matrix(
         (np.concatenate(data), np.concatenate(indices), indptr), shape=(n, n))
 
