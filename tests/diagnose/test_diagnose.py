@@ -431,6 +431,54 @@ def test_records_at_another_rate_are_compared_at_their_own_samples(blind):
     assert kinds == {"cut", "time", "spectrum"}
 
 
+def test_blocks_kept_by_a_rebuild_are_those_a_fresh_build_gives(blind):
+    """After a term is accepted the diagnosis rebuilds the noise weighting, but
+    keeps a recording's blocks when nothing they read changed: each kept block
+    scores every model as a block built afresh at the new model does, and a
+    term that changes a block's weighting (a tool radius for the map, a loop
+    delay for the FRFs and records) has it rebuilt."""
+    from servosurf.diagnose import Model
+    from servosurf.diagnose._blocks import (
+        Context,
+        ForceBlock,
+        FRFBlock,
+        PointsBlock,
+        SpectralBlock,
+    )
+    from servosurf.diagnose._diagnose import _make_blocks, _rebuild, build_case
+    from servosurf.diagnose._manifest import load_manifest
+    from servosurf.diagnose.effects import LoopDelayParams, ToolRadiusErrorParams
+
+    out, _results, key, _score = blind
+    k = next(c for c in key["cases"] if c["effects"] == ["tool-radius-error"])
+    man = load_manifest(out / "cases" / k["case"] / "manifest.toml")
+    ctx = Context(build_case(man))
+    blocks0 = _make_blocks(man, ctx, Model())
+    radius = Model.of(ToolRadiusErrorParams(2e-6))
+    delay = Model.of(LoopDelayParams(4e-6))
+    assert all(a is b for a, b in zip(_rebuild(blocks0, ctx, man, Model()), blocks0,
+                                      strict=True))
+    kept_by = {}
+    for p in (radius, delay):
+        rebuilt = _rebuild(blocks0, ctx, man, p)
+        fresh = _make_blocks(man, ctx, p)
+        for f, b0 in zip(fresh, blocks0, strict=True):
+            if isinstance(f, FRFBlock | ForceBlock):  # noise levels of the nominal
+                f.sigma = b0.sigma
+        kept_by[p] = {b.recording for b, b0 in zip(rebuilt, blocks0, strict=True)
+                      if b is b0}
+        for b, f in zip(rebuilt, fresh, strict=True):
+            assert (b.recording, b.n) == (f.recording, f.n)
+            for q in (Model(), radius, delay):
+                np.testing.assert_allclose(b.deviance(q), f.deviance(q), rtol=1e-9)
+    maps = {b.recording for b in blocks0 if isinstance(b, PointsBlock)}
+    idle = {b.recording for b in blocks0 if isinstance(b, SpectralBlock)}
+    assert maps and not maps & kept_by[radius]
+    assert idle <= kept_by[radius] and idle <= kept_by[delay]  # built at no model
+    assert len(kept_by[radius]) > len(idle) > 0
+    assert kept_by[delay] == idle
+
+
 def test_time_records_at_half_rate_are_whitened_at_their_own_rate(blind):
     """Every second sample of a null case's command records: the whitened
     residual's mean square is the model's aliased-to-unaliased power ratio

@@ -34,6 +34,28 @@ def test_plant_matches_paper_closed_forms(machine):
         np.testing.assert_allclose(net[key][:, 0], eq[key], rtol=RTOL_FRF)
 
 
+def test_cached_plant_frfs_stay_each_plants_own(machine):
+    """The plant FRF cache (a diagnosis asks for a few plants thousands of times)
+    returns each plant's closed forms, however the requests interleave, and its
+    arrays cannot be changed in place by one caller under another."""
+    f = np.geomspace(1, 50e3, 300)
+    other = dataclasses.replace(
+        machine, mechanics=dataclasses.replace(machine.mechanics,
+                                               k2=2.0 * machine.mechanics.k2))
+    for _ in range(3):
+        for m in (machine, other):
+            net = plant_from_machine(m).frf(f)
+            eq = paper_eq_frf(m, f)
+            for key in ("tool_force", "actuator_force", "base"):
+                np.testing.assert_allclose(net[key][:, 0], eq[key], rtol=RTOL_FRF)
+    g = f.copy()
+    g[-1] *= 1.0 + 1e-3  # another grid, if only by its last point
+    np.testing.assert_allclose(plant_from_machine(machine).frf(g)["base"][:, 0],
+                               paper_eq_frf(machine, g)["base"], rtol=RTOL_FRF)
+    with pytest.raises(ValueError, match="read-only"):
+        net["base"][0, 0] = 0.0
+
+
 def test_plant_static_compliance(machine):
     # at DC a force on the tool sees k1 in series with (k2 in series with k3) + k5
     m = machine.mechanics

@@ -347,12 +347,17 @@ class Block:
         Real observations (degrees of freedom of the deviance).
     groups : tuple of str
         Hook groups of the model (:meth:`Model.key`) the block depends on.
+    model_free : bool
+        Whether the block is built from its data alone (a rebuild at another
+        model keeps it).
     time_span : float
         Longest coherent time span of the block's data in s (0: none).
     """
 
     groups: tuple[str, ...] = ()
     time_span: float = 0.0
+    #: True when the block's construction reads no model (only its data)
+    model_free: bool = False
 
     def __init__(self, recording: str, kind: str, domain: str, n: int) -> None:
         self.recording = recording
@@ -412,6 +417,8 @@ class SpectralBlock(Block):
         )
 
     groups = ("perturbation", "base_lines", "sensor_lines", "machine")
+    #: built from the records alone (the expectation is evaluated at each model)
+    model_free = True
 
     def expected(self, p: Model) -> np.ndarray:
         """Expected periodogram (m^2/Hz) at the block's bins under ``p``."""

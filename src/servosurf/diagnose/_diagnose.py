@@ -242,62 +242,105 @@ def _points_of(rec, case: CaseModel):
 
 
 def _make_blocks(man: Manifest, ctx: Context, p: Model) -> list:
-    case = ctx.case
+    """The likelihood blocks of every recording of ``man``, weighted at ``p``."""
     blocks = []
     for rec in man.recordings:
-        d = rec.data
-        if rec.kind in ("following-error", "cut"):
-            lo, hi = analysis_band(d["fs"], case)
-            if hi <= lo:
-                raise ConfigError(
-                    f"{rec.path}: sampled at {d['fs']:.6g} Hz, which leaves no "
-                    f"frequencies to compare (the model starts at {lo:.6g} Hz); "
-                    f"record faster than {2.5 * lo:.6g} Hz"
-                )
-        if rec.kind == "following-error":
-            recs = d["records"]
-            det = [
-                r
-                for r in recs
-                if np.any(r.get("command", 0.0)) or np.any(r.get("force", 0.0))
-            ]
-            if det:
-                blocks.append(TimeBlock(ctx, rec.name, recs, d["fs"], p))
-            else:
-                lengths = sorted({r["fe"].size for r in recs})
-                for n in lengths:
-                    fe = np.array([r["fe"] for r in recs if r["fe"].size == n])
-                    name = rec.name if len(lengths) == 1 else f"{rec.name}[{n}]"
-                    blocks.append(SpectralBlock(ctx, name, fe, d["fs"]))
-        elif rec.kind.startswith("frf-"):
-            blocks.append(FRFBlock(ctx, rec.name, rec.kind, d["freq"], d["frf"], p))
-        elif rec.kind == "cut":
-            cb = CutBlock(ctx, rec.name, d, p)
-            blocks.append(cb)
-            blocks.append(ForceBlock(ctx, cb, d["force"], Model()))
-        elif rec.kind in ("surface", "profile"):
-            x, y, z, grid, along = _points_of(rec, case)
-            if z.size < 16:
-                raise ConfigError(f"{rec.path}: fewer than 16 valid points")
-            order = rec.options.get("form-order", 1)
-            if isinstance(order, bool) or not isinstance(order, int) or not (
-                    1 <= order <= 6):
-                raise ConfigError(
-                    f"{rec.path}: form-order = {order!r}; allowed: an integer "
-                    "1..6 (polynomial order the instrument removed, 1: tilt)")
-            blocks.append(
-                PointsBlock(ctx, rec.name, rec.kind, x, y, z, p, grid=grid,
-                            along=along, form_order=order)
+        blocks += _recording_blocks(rec, ctx, p)
+    return blocks
+
+
+#: Hook groups the noise weighting of every block depends on (the disturbance
+#: PSDs and the loop they pass through), besides the block's own groups.
+_WEIGHT_GROUPS = ("perturbation", "nonlinearity", "workpiece", "machine")
+
+
+def _build_key(block, p: Model) -> tuple:
+    """What of ``p`` the construction of ``block`` reads: its own hook groups (the
+    model it predicts at, e.g. the heights whose pass times and nuisance columns a
+    map block keeps) and those of the noise weighting; nothing for a block built
+    from its data alone."""
+    if block.model_free:
+        return ()
+    return p.key(tuple(block.groups) + _WEIGHT_GROUPS)
+
+
+def _recording_blocks(rec, ctx: Context, p: Model) -> list:
+    """The blocks of one recording, built (and noise-weighted) at ``p``."""
+    case = ctx.case
+    blocks = []
+    d = rec.data
+    if rec.kind in ("following-error", "cut"):
+        lo, hi = analysis_band(d["fs"], case)
+        if hi <= lo:
+            raise ConfigError(
+                f"{rec.path}: sampled at {d['fs']:.6g} Hz, which leaves no "
+                f"frequencies to compare (the model starts at {lo:.6g} Hz); "
+                f"record faster than {2.5 * lo:.6g} Hz"
             )
+    if rec.kind == "following-error":
+        recs = d["records"]
+        det = [
+            r
+            for r in recs
+            if np.any(r.get("command", 0.0)) or np.any(r.get("force", 0.0))
+        ]
+        if det:
+            blocks.append(TimeBlock(ctx, rec.name, recs, d["fs"], p))
+        else:
+            lengths = sorted({r["fe"].size for r in recs})
+            for n in lengths:
+                fe = np.array([r["fe"] for r in recs if r["fe"].size == n])
+                name = rec.name if len(lengths) == 1 else f"{rec.name}[{n}]"
+                blocks.append(SpectralBlock(ctx, name, fe, d["fs"]))
+    elif rec.kind.startswith("frf-"):
+        blocks.append(FRFBlock(ctx, rec.name, rec.kind, d["freq"], d["frf"], p))
+    elif rec.kind == "cut":
+        cb = CutBlock(ctx, rec.name, d, p)
+        blocks.append(cb)
+        blocks.append(ForceBlock(ctx, cb, d["force"], Model()))
+    elif rec.kind in ("surface", "profile"):
+        x, y, z, grid, along = _points_of(rec, case)
+        if z.size < 16:
+            raise ConfigError(f"{rec.path}: fewer than 16 valid points")
+        order = rec.options.get("form-order", 1)
+        if isinstance(order, bool) or not isinstance(order, int) or not (
+                1 <= order <= 6):
+            raise ConfigError(
+                f"{rec.path}: form-order = {order!r}; allowed: an integer "
+                "1..6 (polynomial order the instrument removed, 1: tilt)")
+        blocks.append(
+            PointsBlock(ctx, rec.name, rec.kind, x, y, z, p, grid=grid,
+                        along=along, form_order=order)
+        )
+    for b in blocks:
+        b.source = rec.name  # a recording can have several blocks
+        b.built_at = _build_key(b, p)
     return blocks
 
 
 def _rebuild(blocks, ctx: Context, man: Manifest, p: Model):
-    """Blocks with the noise weighting of ``p`` (FRF and force noise levels kept)."""
-    new = _make_blocks(man, ctx, p)
-    for b_new, b_old in zip(new, blocks, strict=True):
-        if isinstance(b_new, FRFBlock | ForceBlock):
-            b_new.sigma = b_old.sigma
+    """Blocks with the noise weighting of ``p`` (FRF and force noise levels kept
+    from ``blocks``, the blocks at the nominal model).
+
+    A recording whose blocks read nothing that differs between ``p`` and the
+    model they were built at (:func:`_build_key`) keeps them: a tool-radius term
+    leaves the idle records' and the FRFs' weighting as it was, and a diagnosis
+    that accepts nothing builds its map covariances once."""
+    by_rec: dict[str, list] = {}
+    for b in blocks:
+        by_rec.setdefault(b.source, []).append(b)
+    new = []
+    for rec in man.recordings:
+        old = by_rec.get(rec.name, [])
+        if old and all(b.built_at == _build_key(b, p) for b in old):
+            new += old
+            continue
+        fresh = _recording_blocks(rec, ctx, p)
+        if len(fresh) == len(old):
+            for b_new, b_old in zip(fresh, old, strict=True):
+                if isinstance(b_new, FRFBlock | ForceBlock):
+                    b_new.sigma = b_old.sigma
+        new += fresh
     return new
 
 
