@@ -469,7 +469,7 @@ def test_blocks_kept_by_a_rebuild_are_those_a_fresh_build_gives(blind):
                       if b is b0}
         for b, f in zip(rebuilt, fresh, strict=True):
             assert (b.recording, b.n) == (f.recording, f.n)
-            for q in (Model(), radius, delay):
+            for q in (Model(), p):
                 np.testing.assert_allclose(b.deviance(q), f.deviance(q), rtol=1e-9)
     maps = {b.recording for b in blocks0 if isinstance(b, PointsBlock)}
     idle = {b.recording for b in blocks0 if isinstance(b, SpectralBlock)}
