@@ -53,6 +53,7 @@ def ind(discovery):
         generate = discovery("independent.generate")
         score = discovery("independent.score")
         effects = discovery("independent.effects")
+        oracle = discovery("independent.oracle")
 
     return NS
 
@@ -376,13 +377,14 @@ def test_case_is_scaled_to_its_enr_and_the_key_seals(ind, tmp_path):
 
     G = ind.generate
     # seed 3 draws a 150 Hz pickup line in the logged following error
-    e = G.make_case(0, {"effect": "sensor-pickup", "enr": 0.3}, 3, tmp_path / "c")
+    e = G.make_case(0, {"effect": "sensor-pickup", "enr": 0.3}, 3,
+                    tmp_path / "cases" / "c")
     assert "generation_error" not in e
     assert e["enr"] == pytest.approx(0.3, rel=0.15)
     f0, a0 = e["truth"]["frequency"], e["truth"]["amplitude"]
     assert f0 == 150.0
     # the written following-error records carry the line at the stated amplitude
-    man = load_manifest(tmp_path / "c" / "manifest.toml")
+    man = load_manifest(tmp_path / "cases" / "c" / "manifest.toml")
     amps = []
     for r in man.recordings:
         if r.kind != "following-error":
@@ -402,9 +404,74 @@ def test_case_is_scaled_to_its_enr_and_the_key_seals(ind, tmp_path):
     key = {"cases": [e], "seed": 3}
     G.seal(tmp_path, G._jsonable(key))
     assert G.unseal(tmp_path)["cases"][0]["strength"] == pytest.approx(e["strength"])
+    _oracle_contract(ind, G.unseal(tmp_path), tmp_path, a0)
     (tmp_path / "key.sha256").write_text("0" * 64)
     with pytest.raises(RuntimeError, match="commitment"):
         G.unseal(tmp_path)
+
+
+def _oracle_contract(ind, key, root, amplitude):
+    """``oracle.py`` on the pickup case: the replay rebuilds the written
+    recordings exactly; a line added to the log after the loop changes the
+    following-error records only, deterministically (the same change without the
+    noise that runs through the loop), and each record's SNR is the line's: the
+    whitened energy of a sinusoid of amplitude a over n samples at the one-sided
+    noise PSD S is n a^2 / (fs S)."""
+    from servosurf.diagnose import Model, build_case, load_manifest
+
+    key["cases"][0]["case"] = "c"
+    oracle = ind.oracle.oracle((key, 0, str(root)))
+    assert oracle["check"] <= 1e-12
+    fe = {r.path.name for r in load_manifest(root / "cases" / "c" / "manifest.toml")
+          .recordings if r.kind in ("following-error", "cut")}  # logged records
+    assert fe and {k for k, v in oracle["by_recording"].items() if v > 0} <= fe
+    assert oracle["snr_deterministic"] == pytest.approx(oracle["snr"], rel=1e-6)
+    assert oracle["case_projection"] == pytest.approx(
+        oracle["twin_projection"] + oracle["snr"], rel=1e-9, abs=1e-9)
+    man = load_manifest(root / "cases" / "c" / "manifest.toml")
+    case = build_case(man)
+    f0 = key["cases"][0]["truth"]["frequency"]
+    s = float(case.noise_psd(Model(), np.array([f0]), "fe")[0])  # m^2/Hz
+    for r in man.recordings:
+        if r.kind == "following-error":
+            n = sum(rec["fe"].size for rec in r.data["records"])
+        elif r.kind == "cut":
+            n = np.asarray(r.data["fe"]).size
+        else:
+            continue
+        want = math.sqrt(n * amplitude**2 / (r.data["fs"] * s))
+        assert oracle["by_recording"][r.path.name] == pytest.approx(want, rel=0.1), (
+            r.path.name, oracle["by_recording"], want)
+
+
+def test_deterministic_shift_and_the_realised_bound(ind):
+    """The oracle's deterministic twin: time records and maps shifted by the clean
+    change, FRFs scaled by it, metadata kept; the realised composite is the
+    chi2(q - 1) tail beyond the threshold less the projection's square."""
+    from scipy.stats import chi2
+
+    o = ind.oracle
+    noisy = {"idle": np.array([1.0, 2.0]),
+             "cut": {"t": np.array([0.0, 1.0]), "fe": np.array([3.0, 4.0])},
+             "frf": (np.array([10.0]), np.array([2.0 + 2.0j])), "tag": "x"}
+    case = {"idle": np.array([0.5, 0.5]),
+            "cut": {"t": np.array([9.0, 9.0]), "fe": np.array([1.0, 1.0])},
+            "frf": (np.array([10.0]), np.array([3.0 + 0.0j]))}
+    twin = {"idle": np.array([0.0, 0.5]),
+            "cut": {"t": np.array([7.0, 7.0]), "fe": np.array([1.0, 0.0])},
+            "frf": (np.array([10.0]), np.array([1.5 + 0.0j]))}
+    out = o.deterministic_shift(noisy, case, twin)
+    np.testing.assert_array_equal(out["idle"], [1.5, 2.0])
+    np.testing.assert_array_equal(out["cut"]["fe"], [3.0, 5.0])
+    np.testing.assert_array_equal(out["cut"]["t"], [0.0, 1.0])
+    np.testing.assert_array_equal(out["frf"][1], [4.0 + 4.0j])
+    assert out["tag"] == "x"
+    thr = chi2.isf(0.02 / 180, 3)
+    assert o.realised(0.0, 3, 0.02, 180) == pytest.approx(chi2.sf(thr, 2))
+    assert o.realised(-5.0, 3, 0.02, 180) == pytest.approx(chi2.sf(thr, 2))
+    assert o.realised(4.0, 3, 0.02, 180) == pytest.approx(chi2.sf(thr - 16.0, 2))
+    assert o.realised(100.0, 3, 0.02, 180) == 1.0
+    assert o.realised(1.0, 1, 0.02, 180) == 0.0
 
 
 def test_strength_search_stays_below_the_plausible_maximum(ind, monkeypatch):
