@@ -66,20 +66,20 @@ def main(argv=None) -> int:
         counts["solves"] += 1
         return stiffness(self, s)
 
-    blocks = D._make_blocks if not hasattr(D, "_recording_blocks") else None
-    build = D._recording_blocks if blocks is None else D._make_blocks
+    # one count per recording built (a checkout before the per-recording
+    # rebuild counts whole block sets)
+    if hasattr(D, "_recording_blocks"):
+        name, unit = "_recording_blocks", "recordings built"
+    else:
+        name, unit = "_make_blocks", "block sets built"
+    build = getattr(D, name)
 
     def counted_build(*args, **kw):
         counts["builds"] += 1
         return build(*args, **kw)
 
+    setattr(D, name, counted_build)
     _plant.Plant.dynamic_stiffness = counted_stiffness
-    if blocks is None:
-        D._recording_blocks = counted_build
-        unit = "recordings built"
-    else:
-        D._make_blocks = counted_build
-        unit = "block sets built"
     print(f"servosurf from {Path(servosurf.__file__).parent}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         out = a.out or Path(tmp)

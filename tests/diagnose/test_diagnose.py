@@ -199,6 +199,22 @@ def _case(blind, effects, ool=None):
     raise KeyError(effects)
 
 
+def _case_manifest(blind, effects, ool=None):
+    """The loaded manifest of the mini-suite case with ``effects``."""
+    from servosurf.diagnose._manifest import load_manifest
+
+    k, _r = _case(blind, effects, ool)
+    return load_manifest(blind[0] / "cases" / k["case"] / "manifest.toml")
+
+
+def _context(man):
+    """The diagnosis context of a loaded manifest."""
+    from servosurf.diagnose._blocks import Context
+    from servosurf.diagnose._diagnose import build_case
+
+    return Context(build_case(man))
+
+
 def test_null_case_is_consistent(blind):
     _k, r = _case(blind, [])
     assert "error" not in r, r.get("error")
@@ -349,21 +365,17 @@ def test_records_at_another_rate_are_compared_at_their_own_samples(blind):
     one; idle records are compared up to the record's Nyquist frequency."""
     from servosurf.diagnose import Model
     from servosurf.diagnose._blocks import (
-        Context,
         CutBlock,
         SpectralBlock,
         TimeBlock,
         line_power,
     )
-    from servosurf.diagnose._diagnose import _make_blocks, build_case
-    from servosurf.diagnose._manifest import load_manifest
+    from servosurf.diagnose._diagnose import _make_blocks
     from servosurf.diagnose.effects import BaseLineParams
 
-    out, _results, key, _score = blind
-    k = next(c for c in key["cases"] if c["effects"] == ["base-vibration-lines"])
-    man = load_manifest(out / "cases" / k["case"] / "manifest.toml")
-    case = build_case(man)
-    ctx = Context(case)
+    man = _case_manifest(blind, ["base-vibration-lines"])
+    ctx = _context(man)
+    case = ctx.case
     p = Model.of(BaseLineParams(1234.5, 3e-9))
     kinds = set()
     for b in _make_blocks(man, ctx, Model()):
@@ -439,20 +451,16 @@ def test_blocks_kept_by_a_rebuild_are_those_a_fresh_build_gives(blind):
     delay for the FRFs and records) has it rebuilt."""
     from servosurf.diagnose import Model
     from servosurf.diagnose._blocks import (
-        Context,
         ForceBlock,
         FRFBlock,
         PointsBlock,
         SpectralBlock,
     )
-    from servosurf.diagnose._diagnose import _make_blocks, _rebuild, build_case
-    from servosurf.diagnose._manifest import load_manifest
+    from servosurf.diagnose._diagnose import _make_blocks, _rebuild
     from servosurf.diagnose.effects import LoopDelayParams, ToolRadiusErrorParams
 
-    out, _results, key, _score = blind
-    k = next(c for c in key["cases"] if c["effects"] == ["tool-radius-error"])
-    man = load_manifest(out / "cases" / k["case"] / "manifest.toml")
-    ctx = Context(build_case(man))
+    man = _case_manifest(blind, ["tool-radius-error"])
+    ctx = _context(man)
     blocks0 = _make_blocks(man, ctx, Model())
     radius = Model.of(ToolRadiusErrorParams(2e-6))
     delay = Model.of(LoopDelayParams(4e-6))
@@ -485,15 +493,12 @@ def test_time_records_at_half_rate_are_whitened_at_their_own_rate(blind):
     mean(1 + S(fs/2 - f) / S(f)) (subsampling folds the band above the new
     Nyquist frequency), within 5 standard errors."""
     from servosurf.diagnose import Model
-    from servosurf.diagnose._blocks import Context, CutBlock, TimeBlock
-    from servosurf.diagnose._diagnose import _make_blocks, build_case
-    from servosurf.diagnose._manifest import load_manifest
+    from servosurf.diagnose._blocks import CutBlock, TimeBlock
+    from servosurf.diagnose._diagnose import _make_blocks
 
-    out, _results, key, _score = blind
-    k = next(c for c in key["cases"] if c["effects"] == [] and c["ool"] is None)
-    man = load_manifest(out / "cases" / k["case"] / "manifest.toml")
-    case = build_case(man)
-    ctx = Context(case)
+    man = _case_manifest(blind, [])
+    ctx = _context(man)
+    case = ctx.case
     p = Model()
     checked = 0
     for b in _make_blocks(man, ctx, p):
@@ -525,11 +530,7 @@ def test_idle_records_at_half_the_controller_rate_run_end_to_end(
     frequency is outside the compared band)."""
     from scipy.signal import decimate
 
-    from servosurf.diagnose._manifest import load_manifest
-
-    out, _results, key, _score = blind
-    k = next(c for c in key["cases"] if c["effects"] == [] and c["ool"] is None)
-    man = load_manifest(out / "cases" / k["case"] / "manifest.toml")
+    man = _case_manifest(blind, [])
     rec = next(
         r
         for r in man.recordings

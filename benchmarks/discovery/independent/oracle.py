@@ -269,7 +269,8 @@ def table(s: dict, rows: list[dict]) -> str:
         f"({s['configurations']} configurations for the composite estimate):",
         "",
         "| target ENR | n | median oracle SNR | cases SNR < 3 | NP bound | composite | "
-        "realised composite | median abs twin projection (cases > 3) | observed top-1 |",
+        "realised composite | median abs twin projection (cases > 3) | "
+        "observed top-1 |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
 
