@@ -157,28 +157,41 @@ def test_adc_step_puts_the_reading_on_its_grid(loop):
 
 
 def test_quantisation_noise_floors():
-    """DAC and ADC steps add white floors step / sqrt(6 fs) (variance step^2 / 12
-    per sample over the one-sided band fs / 2), in quadrature."""
+    """DAC and ADC steps add white noise of variance step^2 / 12 per sample (one-
+    sided density step^2 / (6 fs)). The DAC's is a current floor the amplifier's
+    roll-off shapes, in quadrature with the machine file's; the ADC's is added to
+    the sensor-noise PSD after its roll-off: white up to the Nyquist frequency,
+    as the Welch PSD of a rounding error is (the oracle: scipy on rounded numbers,
+    not servosurf's PSD code)."""
+    import scipy.signal
+
+    from servosurf.noise import evaluate_psd
+
     m = load_machine()
     fs = m.controller.sample_rate
     dq, aq = 3e-4, 2e-9
     got = E.ConverterQuantisationParams(dac_step=dq, adc_step=aq).machine(m)
     d0, d1 = m.disturbances, got.disturbances
     i_q = m.actuator.current_gain * dq / math.sqrt(6 * fs)
-    y_q = aq / math.sqrt(6 * fs)
     assert d1.current_noise.floor == pytest.approx(
         math.sqrt(d0.current_noise.floor**2 + i_q**2), rel=1e-12)
-    assert d1.sensor_noise.floor == pytest.approx(
-        math.sqrt(d0.sensor_noise.floor**2 + y_q**2), rel=1e-12)
     # the rest of the machine is untouched
     assert dataclasses.replace(d1, current_noise=d0.current_noise,
                                sensor_noise=d0.sensor_noise) == d0
+    assert dataclasses.replace(d1.sensor_noise, white=0.0) == d0.sensor_noise
     assert E.ConverterQuantisationParams(dead_band=1e-3).machine(m) is m
-    # a rounded white-ish signal: the error's variance is step^2 / 12
+    # a rounded signal: the rounding error's variance is step^2 / 12 and its PSD
+    # is flat to fs / 2 (at the sensor's 15 kHz corner and at 0.45 fs alike)
     rng = np.random.default_rng(5)  # seeded: any draw works
-    x = rng.standard_normal(200_000) * 50 * aq
+    x = np.cumsum(rng.standard_normal(400_000)) * 3 * aq
     err = aq * np.floor(x / aq + 0.5) - x
     assert np.var(err) == pytest.approx(aq**2 / 12, rel=0.02)
+    f, pxx = scipy.signal.welch(err, fs=fs, nperseg=4096)
+    for f0 in (1e3, m.disturbances.sensor_noise.corner, 0.45 * fs):
+        sel = np.abs(f - f0) < 0.02 * fs
+        added = (evaluate_psd(d1.sensor_noise, np.array([f0]))
+                 - evaluate_psd(d0.sensor_noise, np.array([f0])))[0]
+        assert added == pytest.approx(np.mean(pxx[sel]), rel=0.05, abs=0.0), f0
 
 
 def test_sensor_pickup_is_in_the_following_error_only():

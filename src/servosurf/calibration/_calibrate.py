@@ -140,6 +140,8 @@ PARAMETERS: tuple[tuple[str, Any, str], ...] = (
     ("spindle.axial-error.corner", 500.0, "assumed: roll-off of the asynchronous "
      "axial error"),
     ("spindle.axial-error.order", 2.0, "assumed: second-order roll-off"),
+    ("spindle.axial-error.white", 0.0, "assumed: no white density above the "
+     "roll-off"),
     ("controller.sample-rate", 199.6e3, "paper: 'closed loop update rate was set to "
      "199.6 kHz' (4.1)"),
     ("controller.delay", 0.5, "assumed: computation delay of half a sample beyond "
@@ -355,6 +357,9 @@ def _dist_labels(prefix: str, fit: DisturbanceFit, search_note: str) -> dict:
     lab[f"{prefix}.current-noise.order"] = "assumed: first-order roll-off"
     lab[f"{prefix}.current-noise.floor"] = "assumed: no white floor"
     lab[f"{prefix}.base-vibration.floor"] = "assumed: no white floor"
+    for part in parts:
+        lab[f"{prefix}.{part}.white"] = (
+            "assumed: no converter quantisation (white density after the roll-off)")
     lab[f"{prefix}.base-vibration.corner"] = "assumed: no roll-off"
     lab[f"{prefix}.base-vibration.order"] = "assumed: no roll-off"
     return lab

@@ -125,7 +125,8 @@ def evaluate_psd(model: PSDModel, freq: np.ndarray) -> np.ndarray:
     -------
     ndarray
         One-sided PSD in (unit)^2/Hz. A measured PSD is interpolated linearly in
-        log-log coordinates and is zero outside its frequency range.
+        log-log coordinates and is zero outside its frequency range; the model's
+        ``white`` density (squared) is added at every frequency after the roll-off.
     """
     f = np.asarray(freq, dtype=float)
     if model.csv:
@@ -134,9 +135,9 @@ def evaluate_psd(model: PSDModel, freq: np.ndarray) -> np.ndarray:
             lp = np.log(np.maximum(pm, 1e-300))
         out = np.exp(np.interp(np.log(f), np.log(fm), lp))
         out[(f < fm[0]) | (f > fm[-1])] = 0.0
-        return out
+        return out + model.white**2
     law = model.level**2 * (f / model.ref_frequency) ** model.slope + model.floor**2
-    return law / (1.0 + (f / model.corner) ** model.order)
+    return law / (1.0 + (f / model.corner) ** model.order) + model.white**2
 
 
 def welch_psd(

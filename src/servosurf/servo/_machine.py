@@ -324,10 +324,12 @@ class Controller:
 class PSDModel:
     """A parametric one-sided PSD or a measured one from CSV.
 
-    ``W(f) = (level^2 (f / ref_frequency)^slope + floor^2) / (1 + (f / corner)^order)``,
-    in (unit of the disturbance)^2 / Hz. ``csv`` (``frequency_hz,psd``)
-    replaces the parametric form when given; relative paths resolve against the
-    machine file.
+    ``W(f) = (level^2 (f / ref_frequency)^slope + floor^2) / (1 + (f / corner)^order)
+    + white^2``, in (unit of the disturbance)^2 / Hz. ``csv`` (``frequency_hz,psd``)
+    replaces the rolled-off parametric part when given; relative paths resolve
+    against the machine file. ``white`` is a density added after the roll-off: noise
+    the electronics do not shape, such as a converter's quantisation (an ADC that
+    digitises the sensor's output is white up to the Nyquist frequency).
     """
 
     level: float = param(
@@ -348,6 +350,10 @@ class PSDModel:
     order: float = param(2.0, unit="", low=0.0, high=12.0, doc="roll-off order")
     floor: float = param(
         0.0, unit="unit/sqrt(Hz)", low=0.0, doc="white floor added to the power law"
+    )
+    white: float = param(
+        0.0, unit="unit/sqrt(Hz)", low=0.0,
+        doc="white density added after the roll-off (converter quantisation)"
     )
     csv: str = param("", doc="measured PSD file: frequency_hz,psd")
 

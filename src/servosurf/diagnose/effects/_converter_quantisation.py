@@ -39,10 +39,15 @@ class ConverterQuantisationParams(EffectParams):
     """Quantisation of the loop's converters and a dead band of the command.
 
     The DAC and ADC steps act through their additive-noise equivalent (white,
-    variance ``step^2 / 12`` per sample: a current-noise floor
-    ``G_I dac_step / sqrt(6 fs)`` in A/sqrt(Hz) and a sensor-noise floor
-    ``adc_step / sqrt(6 fs)`` in m/sqrt(Hz), added in quadrature to the machine
-    file's floors); the dead band is a deterministic nonlinearity of the loop
+    variance ``step^2 / 12`` per sample). The DAC's is a current-noise floor
+    ``G_I dac_step / sqrt(6 fs)`` in A/sqrt(Hz), added in quadrature to the
+    machine file's floor: the DAC drives the current amplifier, whose roll-off
+    shapes it. The ADC's is a white sensor-noise density ``adc_step / sqrt(6 fs)``
+    in m/sqrt(Hz) added after the sensor noise's roll-off (``PSDModel.white``):
+    the ADC digitises the gauge electronics' output, so its rounding is white up
+    to the controller's Nyquist frequency, not rolled off at the gauge's corner
+    (rolled off, a 0.3-0.8 nm step's noise hid under the model above 15 kHz and
+    the excess above 64 kHz stayed unexplained). The dead band is a deterministic nonlinearity of the loop
     (the command ``u`` is zero for ``|u| <= b`` and ``u -+ b`` beyond).
     """
 
@@ -72,7 +77,7 @@ class ConverterQuantisationParams(EffectParams):
         i_q = m.actuator.current_gain * self.dac_step / math.sqrt(6.0 * fs)
         y_q = self.adc_step / math.sqrt(6.0 * fs)
         cn = dataclasses.replace(cn, floor=math.hypot(cn.floor, i_q))
-        sn = dataclasses.replace(sn, floor=math.hypot(sn.floor, y_q))
+        sn = dataclasses.replace(sn, white=math.hypot(sn.white, y_q))
         return dataclasses.replace(m, disturbances=dataclasses.replace(
             d, current_noise=cn, sensor_noise=sn))
 
