@@ -152,3 +152,38 @@ def test_record_noise_level_is_profiled_per_source(ctx, sensor_factor):
         assert abs(got["sensor_noise"] / sensor_factor - 1) < 0.08, got
     w = block.residual(Model())
     assert abs(np.mean(w**2) - 1) < 0.05
+
+
+@pytest.mark.parametrize("shift", [0.23e-6, -0.6e-6])
+def test_ring_profile_is_registered_not_only_linearised(ctx, shift):
+    """A ring profile rotated by a fraction of a micrometre along the circle: the
+    block finds the rotation (``registration["along_m"]``) and evaluates the model
+    there, so what is left is the noise-free remainder of the iteration, far below
+    the second-order remainder the linearised nuisance leaves (which named a null
+    case's rotation thermal drift). The oracle is the rotation the test applied."""
+    import servosurf.diagnose._blocks as blocks
+
+    block = _ring_block(ctx, shift)
+    got = block.registration["along_m"]
+    assert got == pytest.approx(shift, rel=0.01, abs=0.0), got
+    # translations of the arc are nearly collinear with the rotation on a quarter
+    # ring: they may take a few picometres, not the shift
+    for k in ("x_m", "y_m"):
+        assert abs(block.registration[k]) < 0.02 * abs(shift), block.registration
+    rms_reg = np.sqrt(np.mean(block.nuisance_fit(Model()) ** 2))
+    saved = blocks.REGISTER_ITERATIONS
+    try:
+        blocks.REGISTER_ITERATIONS = 0  # the linearised nuisance alone
+        lin = _ring_block(ctx, shift)
+    finally:
+        blocks.REGISTER_ITERATIONS = saved
+    assert lin.registration["along_m"] == 0.0
+    rms_lin = np.sqrt(np.mean(lin.nuisance_fit(Model()) ** 2))
+    assert rms_reg < 0.01 * rms_lin, (rms_reg, rms_lin)
+
+
+def test_unshifted_ring_profile_is_left_where_it_is(ctx):
+    """No shift, no move: a registration step below REGISTER_TOL of the pitch is
+    not taken (the points stay the manifest's)."""
+    block = _ring_block(ctx, 0.0)
+    assert block.registration == {"x_m": 0.0, "y_m": 0.0, "along_m": 0.0}

@@ -128,6 +128,9 @@ class Diagnosis:
     #: per time recording, its profiled noise power per source relative to the
     #: model's (factors off 1 only): a calibration, not physics
     noise_levels: dict = field(default_factory=dict)
+    #: per map or profile, the lateral registration the model was evaluated at
+    #: (m; estimated at the fitted model): an instrument's placement, not physics
+    registration: dict = field(default_factory=dict)
 
     @property
     def fit_before_percent(self) -> float:
@@ -160,6 +163,7 @@ class Diagnosis:
             "refused": self.refused,
             "acceptance": self.acceptance,
             "record_noise_levels": self.noise_levels,
+            "registration_m": self.registration,
         }
 
 
@@ -636,7 +640,14 @@ def _diagnose(man: Manifest, *, progress, effects, max_terms: int) -> Diagnosis:
         refused=refused,
         acceptance=eng.acceptance(terms),
         noise_levels=_noise_levels(blocks1),
+        registration=_registration(blocks1),
     )
+
+
+def _registration(blocks) -> dict:
+    """Lateral registration (m) of each map and profile block."""
+    return {b.recording: {k: float(v) for k, v in b.registration.items()}
+            for b in blocks if getattr(b, "registration", None) is not None}
 
 
 def _noise_levels(blocks) -> dict:
