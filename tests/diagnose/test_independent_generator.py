@@ -428,6 +428,13 @@ def _oracle_contract(ind, key, root, amplitude):
     assert oracle["snr_deterministic"] == pytest.approx(oracle["snr"], rel=1e-6)
     assert oracle["case_projection"] == pytest.approx(
         oracle["twin_projection"] + oracle["snr"], rel=1e-9, abs=1e-9)
+    # a case under its own weighting, through the copy that holds another
+    # recording's data, is the case: nothing of the data is left behind
+    m = root / "cases" / "c" / "manifest.toml"
+    own, same = ind.oracle._residuals(m), ind.oracle._residuals(m, m)
+    assert own.keys() == same.keys()
+    for k in own:
+        np.testing.assert_array_equal(own[k], same[k])
     man = load_manifest(root / "cases" / "c" / "manifest.toml")
     case = build_case(man)
     f0 = key["cases"][0]["truth"]["frequency"]
